@@ -1,0 +1,243 @@
+"""Scenes from highway-env: lanes from any road network, and a recorder of every vehicle.
+
+highway-env's frame has y pointing down the screen; everything here leaves in the toolkit's
+right-handed world frame (`rasterize.frames.world_from_highway_env`). Lane samplers call only the
+`AbstractLane` interface (`position`, `width_at`, `local_coordinates`, `length`, `line_types`), so
+straight, sine, circular and poly lanes all work.
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from rasterize.errors import InputError
+from rasterize.frames import heading_from_highway_env, world_from_highway_env
+from rasterize.scene import STATE_DIM, AgentKind, Lane, LineType, Scene
+
+
+@dataclass(frozen=True)
+class LaneSampling:
+    """How lanes are cut out of a road network around the ego."""
+
+    radius_m: float = 260.0     # keep lane points within this distance of the ego
+    step_m: float = 1.0         # arc-length spacing of samples on curved lanes
+    simplify_m: float = 0.02    # polyline simplification tolerance
+
+
+def _sample_lane(lane, s_values: np.ndarray) -> Lane:
+    centre, left, right = [], [], []
+    for s in s_values:
+        half = 0.5 * lane.width_at(s)
+        centre.append(lane.position(s, 0.0))
+        left.append(lane.position(s, -half))   # negative lateral is the left side in highway-env
+        right.append(lane.position(s, half))
+    centre, left, right = (world_from_highway_env(np.asarray(p)) for p in (centre, left, right))
+    line_left, line_right = (LineType(int(t)) for t in lane.line_types)
+    return Lane(centre, left, right, line_left, line_right, float(lane.width_at(s_values[0])),
+                float(s_values[0]))
+
+
+def _simplify(lane: Lane, tolerance_m: float) -> Lane:
+    """Drop samples that the centre line does not need (straight stretches keep 2 points)."""
+    if lane.centre.shape[0] <= 2:
+        return lane
+    keep = cv2.approxPolyDP(
+        (lane.centre * 1000.0).astype(np.float32).reshape(-1, 1, 2), tolerance_m * 1000.0, False
+    )
+    # approxPolyDP returns points, not indices: recover them (they are exact copies).
+    scaled = (lane.centre * 1000.0).astype(np.float32)
+    idx = []
+    start = 0
+    for p in keep.reshape(-1, 2):
+        j = start + int(np.argmin(np.abs(scaled[start:] - p).sum(axis=1)))
+        idx.append(j)
+        start = j
+    idx = np.unique(np.asarray(idx + [0, lane.centre.shape[0] - 1]))
+    return Lane(lane.centre[idx], lane.left[idx], lane.right[idx], lane.left_line,
+                lane.right_line, lane.width_m, lane.start_s)
+
+
+def lanes_near(network, centre_world: np.ndarray, sampling: LaneSampling = LaneSampling()
+               ) -> tuple[Lane, ...]:
+    """Every lane of a highway-env `RoadNetwork` that comes within `sampling.radius_m` of a point.
+
+    Long lanes are sampled only over the arc-length window that can reach the point.
+    """
+    centre_hw = world_from_highway_env(centre_world)
+    radius = sampling.radius_m
+    lanes = []
+    for _from, tos in network.graph.items():
+        for _to, lane_list in tos.items():
+            for lane in lane_list:
+                length = float(lane.length)
+                if length <= 2 * radius:
+                    lo, hi = 0.0, length
+                else:
+                    s_here = float(lane.local_coordinates(centre_hw)[0])
+                    lo, hi = max(0.0, s_here - radius), min(length, s_here + radius)
+                    if hi - lo < 1e-6:
+                        continue
+                n = max(2, int(np.ceil((hi - lo) / sampling.step_m)) + 1)
+                sampled = _sample_lane(lane, np.linspace(lo, hi, n))
+                if np.linalg.norm(sampled.centre - centre_world, axis=1).min() > radius:
+                    continue
+                lanes.append(_simplify(sampled, sampling.simplify_m))
+    return tuple(lanes)
+
+
+def _wrap(angle: np.ndarray) -> np.ndarray:
+    return (angle + np.pi) % (2 * np.pi) - np.pi
+
+
+def _kind_of(obj) -> AgentKind:
+    from highway_env.vehicle.kinematics import Vehicle
+
+    return AgentKind.VEHICLE if isinstance(obj, Vehicle) else AgentKind.OBSTACLE
+
+
+class TrafficRecorder:
+    """Records every vehicle and object on a highway-env road at each call of `record`.
+
+    Agents keep a stable integer id for as long as the recorder lives (vehicles that leave and
+    are removed simply stop being valid). `scene(...)` cuts a `Scene` out of the record.
+    """
+
+    def __init__(self, road, ego, dt_s: float):
+        if not dt_s > 0:
+            raise InputError(f"TrafficRecorder dt_s must be positive seconds, got {dt_s}")
+        self.road, self.ego, self.dt_s = road, ego, float(dt_s)
+        self._ids: dict[int, int] = {}          # id(vehicle object) -> agent id
+        self._alive: list[object] = []          # keeps objects alive so ids are never reused
+        self._rows: list[tuple[int, int, np.ndarray]] = []  # (step, agent, state[6])
+        self._sizes: list[np.ndarray] = []
+        self._kinds: list[int] = []
+        self._last_heading: dict[int, tuple[int, float]] = {}
+        self.num_steps = 0
+        self._cache = None
+
+    def _agent_id(self, obj) -> int:
+        key = id(obj)
+        if key not in self._ids:
+            self._ids[key] = len(self._sizes)
+            self._alive.append(obj)
+            self._sizes.append(np.array([obj.LENGTH, obj.WIDTH], dtype=np.float64))
+            self._kinds.append(int(_kind_of(obj)))
+        return self._ids[key]
+
+    @property
+    def ego_id(self) -> int:
+        return self._agent_id(self.ego)
+
+    def record(self) -> None:
+        """Append the current state of every vehicle and object on the road."""
+        step = self.num_steps
+        for obj in list(self.road.vehicles) + list(self.road.objects):
+            agent = self._agent_id(obj)
+            pos = world_from_highway_env(obj.position)
+            heading = float(heading_from_highway_env(obj.heading))
+            prev = self._last_heading.get(agent)
+            yaw_rate = (float(_wrap(heading - prev[1])) / self.dt_s
+                        if prev is not None and prev[0] == step - 1 else 0.0)
+            self._last_heading[agent] = (step, heading)
+            speed = float(getattr(obj, "speed", 0.0))
+            state = np.array([pos[0], pos[1], np.cos(heading), np.sin(heading), speed, yaw_rate])
+            self._rows.append((step, agent, state))
+        self.ego_id  # the ego is always known, even before it moves
+        self.num_steps += 1
+        self._cache = None
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(states [A, S, 6], valid [A, S], sizes [A, 2], kinds [A]) of the whole record."""
+        if self._cache is None:
+            n_agents, n_steps = len(self._alive), self.num_steps
+            states = np.zeros((n_agents, n_steps, STATE_DIM))
+            valid = np.zeros((n_agents, n_steps), dtype=bool)
+            for step, agent, state in self._rows:
+                states[agent, step] = state
+                valid[agent, step] = True
+            self._cache = (states, valid, np.asarray(self._sizes).reshape(-1, 2),
+                           np.asarray(self._kinds, dtype=np.int8))
+        return self._cache
+
+    def scene(self, step: int, history_s: float = 2.0, future_s: float = 6.0, dt_s: float = 0.5,
+              radius_m: float = 120.0, max_agents: int = 32, lanes: bool = True,
+              sampling: LaneSampling = LaneSampling(), source: str = "") -> Scene:
+        """The scene at recorded `step`, resampled every `dt_s` (a multiple of the record's dt).
+
+        Agents: the ego first, then the others present at `step` within `radius_m` of the ego,
+        nearest first, at most `max_agents` in all. Times outside the record are invalid.
+        """
+        stride = int(round(dt_s / self.dt_s))
+        if stride < 1 or abs(stride * self.dt_s - dt_s) > 1e-6:
+            raise InputError(f"scene dt_s={dt_s} must be a multiple of the record's {self.dt_s} s")
+        if not 0 <= step < self.num_steps:
+            raise InputError(f"scene step {step} is outside the record (0..{self.num_steps - 1})")
+        n_hist, n_fut = int(round(history_s / dt_s)), int(round(future_s / dt_s))
+        states, valid, sizes, kinds = self.arrays()
+        ego = self.ego_id
+        if not valid[ego, step]:
+            raise InputError(f"the ego is not on the road at recorded step {step}")
+        ego_xy = states[ego, step, :2]
+        present = np.flatnonzero(valid[:, step])
+        others = [a for a in present if a != ego]
+        dist = np.array([np.linalg.norm(states[a, step, :2] - ego_xy) for a in others])
+        order = [others[i] for i in np.argsort(dist, kind="stable") if dist[i] <= radius_m]
+        agents = np.array([ego] + order[: max_agents - 1], dtype=np.int64)
+
+        times = step + stride * np.arange(-n_hist, n_fut + 1)
+        inside = (times >= 0) & (times < self.num_steps)
+        clipped = np.clip(times, 0, self.num_steps - 1)
+        sel_states = states[agents][:, clipped]
+        sel_valid = valid[agents][:, clipped] & inside[None, :]
+        lane_set = lanes_near(self.road.network, ego_xy, sampling) if lanes else ()
+        return Scene(sel_states, sel_valid, sizes[agents], kinds[agents], ego_index=0,
+                     current_index=n_hist, dt=dt_s, lanes=lane_set, source=source,
+                     time_s=step * self.dt_s)
+
+
+def scene_from_highway_env(env, history_s: float = 2.0, future_s: float = 0.0, *,
+                           recorder: TrafficRecorder | None = None, dt_s: float = 0.5,
+                           radius_m: float = 120.0, max_agents: int = 32,
+                           sampling: LaneSampling = LaneSampling()) -> Scene:
+    """The scene of a live highway-env env now, in the toolkit's world frame.
+
+    History comes from `recorder` (one that has been recording this env at a rate dividing
+    `dt_s`); without one only the present is valid. A positive `future_s` is obtained by letting
+    the simulator continue on a deep copy of the road, every vehicle (the ego too) following its
+    own behaviour model; the env itself is left untouched.
+    """
+    base = env.unwrapped
+    sim_dt = 1.0 / float(base.config["simulation_frequency"])
+    if recorder is None:
+        recorder = TrafficRecorder(base.road, base.vehicle, dt_s)
+        recorder.record()
+        sub_steps = int(round(dt_s / sim_dt))
+    else:
+        sub_steps = int(round(recorder.dt_s / sim_dt))
+        if recorder.num_steps == 0:
+            recorder.record()
+    now = recorder.num_steps - 1
+    if future_s > 0:
+        recorder = copy.copy(recorder)
+        recorder._rows = list(recorder._rows)
+        recorder._last_heading = dict(recorder._last_heading)
+        road = copy.deepcopy(base.road)
+        # The copies stand in for the originals: map each copy to its original's agent id.
+        recorder._ids = dict(recorder._ids)
+        for orig, twin in zip(list(base.road.vehicles) + list(base.road.objects),
+                              list(road.vehicles) + list(road.objects)):
+            recorder._ids[id(twin)] = recorder._agent_id(orig)
+            recorder._alive = recorder._alive + [twin]  # keep-alive only; ids come from _sizes
+        recorder.road = road
+        recorder.ego = road.vehicles[list(base.road.vehicles).index(base.vehicle)]
+        for _ in range(int(round(future_s / recorder.dt_s))):
+            for _ in range(max(1, sub_steps)):
+                road.act()
+                road.step(sim_dt)
+            recorder.record()
+    return recorder.scene(now, history_s, future_s, dt_s, radius_m, max_agents, sampling=sampling,
+                          source=str(base.spec.id if base.spec else type(base).__name__))

@@ -1,0 +1,139 @@
+"""The grid-resolution maps the planner needs, each a pure function of a Scene and a GridConfig.
+
+Shapes: every map is [rows, cols] float32 (motion features [3, rows, cols]); cells are (row, col)
+with row 0 the front edge of the grid (see `rasterize.frames`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rasterize.config import GridConfig
+from rasterize.errors import InputError
+from rasterize.frames import (
+    cell_centres_ego, ego_from_grid, ego_from_world, ego_pose, grid_from_ego, heading_angle, in_grid,
+)
+from rasterize.scene import Scene
+
+# Sub-samples per cell side when averaging a Gaussian over a cell: highway cells are 4.8 m long,
+# longer than the 1.5 m sigma, so a value at the cell centre alone could miss an agent entirely.
+_SUBSAMPLES = 5
+
+
+def _subcell_offsets(grid: GridConfig) -> np.ndarray:
+    """Ego-frame offsets [S, 2] of the sub-sample points within a cell, about its centre."""
+    u = (np.arange(_SUBSAMPLES) + 0.5) / _SUBSAMPLES - 0.5
+    dx, dy = np.meshgrid(u * grid.row_m, u * grid.col_m, indexing="ij")
+    return np.stack([dx.ravel(), dy.ravel()], axis=-1)
+
+
+def uncertainty_map(scene: Scene, grid: GridConfig, sigma_x: float = 0.5,
+                    sigma_y: float = 1.5) -> np.ndarray:
+    """Positional uncertainty of the ado agents now, [rows, cols] in [0, 1].
+
+    Each ado agent is an unnormalised bivariate Gaussian (peak 1) centred on it: `sigma_y` metres
+    along its heading and `sigma_x` across it, so the default 0.5 / 1.5 is a car-shaped oval (the
+    image axes of the planner paper: x across, y along an agent aligned with the ego). Agents
+    combine by maximum; each cell holds the mean over its area.
+    """
+    if not (sigma_x > 0 and sigma_y > 0):
+        raise InputError(f"uncertainty sigmas must be positive metres, got {sigma_x}, {sigma_y}")
+    origin, heading = ego_pose(scene)
+    now = scene.current_index
+    ados = [a for a in np.flatnonzero(scene.valid[:, now]) if a != scene.ego_index]
+    points = cell_centres_ego(grid)[:, :, None, :] + _subcell_offsets(grid)  # [R, C, S, 2]
+    density = np.zeros(points.shape[:3])
+    reach = 4.0 * max(sigma_x, sigma_y) + max(grid.row_m, grid.col_m)
+    for agent in ados:
+        centre = ego_from_world(scene.states[agent, now, :2], origin, heading)
+        rel_heading = heading_angle(scene.states[agent, now, 2:4]) - heading
+        d = points - centre
+        along = d[..., 0] * np.cos(rel_heading) + d[..., 1] * np.sin(rel_heading)
+        across = -d[..., 0] * np.sin(rel_heading) + d[..., 1] * np.cos(rel_heading)
+        if np.hypot(along, across).min() > reach:
+            continue
+        g = np.exp(-0.5 * ((along / sigma_y) ** 2 + (across / sigma_x) ** 2))
+        np.maximum(density, g, out=density)
+    return density.mean(axis=2).astype(np.float32)
+
+
+def goal_map(goal_cell: tuple[int, int], grid: GridConfig, variance: float = 5.0) -> np.ndarray:
+    """Gaussian (peak 1) around `goal_cell` (row, col), variance in cells squared, [rows, cols]."""
+    if not variance > 0:
+        raise InputError(f"goal variance must be positive (cells^2), got {variance}")
+    rows, cols = np.meshgrid(np.arange(grid.rows), np.arange(grid.cols), indexing="ij")
+    d2 = (rows - goal_cell[0]) ** 2 + (cols - goal_cell[1]) ** 2
+    return np.exp(-0.5 * d2 / variance).astype(np.float32)
+
+
+def _densify(points_ego: np.ndarray, grid: GridConfig) -> list[tuple[int, int]]:
+    """Cells a polyline passes through, as a 4-connected path, stopping where it leaves the grid."""
+    step = 0.25 * min(grid.row_m, grid.col_m)
+    path: list[tuple[int, int]] = []
+    for a, b in zip(points_ego[:-1], points_ego[1:]):
+        n = max(1, int(np.ceil(np.linalg.norm(b - a) / step)))
+        t = np.linspace(0.0, 1.0, n + 1)[:, None]
+        samples = a + t * (b - a)
+        cells = grid_from_ego(samples, grid)
+        for point, cell in zip(samples, cells):
+            if not in_grid(cell, grid):
+                return path
+            cell = (int(cell[0]), int(cell[1]))
+            if path and cell == path[-1]:
+                continue
+            if path and abs(cell[0] - path[-1][0]) + abs(cell[1] - path[-1][1]) > 1:
+                # A diagonal step (the segment crossed a cell corner): go through whichever of
+                # the two side cells is nearer the point, keeping the path 4-connected.
+                r0, c0 = path[-1]
+                options = [(cell[0], c0), (r0, cell[1])]
+                best = min(options, key=lambda rc: np.linalg.norm(ego_from_grid(rc, grid) - point))
+                path.append(best)
+            path.append(cell)
+    return path
+
+
+def demo_visitation(scene: Scene, grid: GridConfig) -> tuple[np.ndarray, np.ndarray]:
+    """D_demo of the ego's recorded future: (visit counts [rows, cols], goal one-hot [rows, cols]).
+
+    The path starts at the ego's cell, follows its future waypoints densified to a 4-connected
+    cell path, and ends at the last cell inside the grid, where the goal one-hot sits (the
+    planner's `end` action).
+    """
+    origin, heading = ego_pose(scene)
+    future = scene.ego_future_xy()
+    points = np.concatenate([[[0.0, 0.0]], ego_from_world(future, origin, heading)], axis=0)
+    path = _densify(points, grid)
+    counts = np.zeros((grid.rows, grid.cols), dtype=np.float32)
+    goal = np.zeros_like(counts)
+    for r, c in path:
+        counts[r, c] += 1.0
+    goal[path[-1]] = 1.0
+    return counts, goal
+
+
+def demo_goal_cell(scene: Scene, grid: GridConfig) -> tuple[int, int]:
+    """The goal of a demonstration: the last in-grid cell of its densified future path."""
+    _, goal = demo_visitation(scene, grid)
+    r, c = np.argwhere(goal)[0]
+    return int(r), int(c)
+
+
+def start_cell(grid: GridConfig) -> tuple[int, int]:
+    """The ego's own cell (the ego sits at the ego-frame origin)."""
+    r, c = grid_from_ego(np.zeros(2), grid)
+    return int(r), int(c)
+
+
+def motion_features(scene: Scene, grid: GridConfig) -> np.ndarray:
+    """[3, rows, cols]: ego speed (m/s) everywhere, cell-centre x and y over the grid's extent.
+
+    x is divided by the grid's length (front + back) and y by its width (left + right), so both
+    stay within [-1, 1] whatever the extent.
+    """
+    centres = cell_centres_ego(grid)
+    speed = float(scene.ego_state()[4])
+    return np.stack([
+        np.full((grid.rows, grid.cols), speed),
+        centres[..., 0] / grid.extent.length_m,
+        centres[..., 1] / grid.extent.width_m,
+    ]).astype(np.float32)
