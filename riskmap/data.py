@@ -1,0 +1,131 @@
+"""The demonstration dataset: shards written by `riskmap collect`, served as training samples.
+
+A sample (grid G = resolution, C = raster channels):
+    raster       float32 [C, 200, 200]  BEV raster in [0, 1]
+    motion       float32 [3, G, G]      ego speed, cell x / length, cell y / width
+    demo         float32 [2, G, G]      D_demo: path visit counts, goal one-hot
+    uncertainty  float32 [G, G]         ado agents' positional uncertainty
+    goal_map     float32 [G, G]         Gaussian around the demonstration's goal cell
+    start_cell   int64   [2]            the ego's (row, col)
+    future       float32 [F, 2]         the ego's future waypoints, ego frame, metres
+"""
+
+from __future__ import annotations
+
+import json
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from rasterize.config import RasterConfig
+from rasterize.errors import InputError
+from rasterize.frames import ego_from_world, ego_pose
+from rasterize.maps import demo_visitation, goal_map, motion_features, uncertainty_map
+from rasterize.raster import rasterize_scene
+from rasterize.scene import Scene
+from rasterize.scene_io import check_packed, unpack_scene
+from riskmap.collect import INDEX, MANIFEST
+
+try:  # torch is optional for reading scenes, required for DataLoader use
+    from torch.utils.data import Dataset as _TorchDataset
+except ImportError:  # pragma: no cover
+    _TorchDataset = object
+
+
+def load_manifest(root: Path) -> dict:
+    root = Path(root)
+    path = root / MANIFEST
+    if not path.exists():
+        raise InputError(f"--data {root} is not a dataset (no {MANIFEST}); "
+                         "create one with `riskmap collect`")
+    try:
+        return json.loads(path.read_text())
+    except ValueError:
+        raise InputError(f"{path} is not valid JSON; collect the dataset again") from None
+
+
+def _load_shard(path: Path) -> dict[str, np.ndarray]:
+    if not path.exists():
+        raise InputError(f"shard {path} listed in the index is missing; "
+                         "run `riskmap collect ... --resume` to rebuild it")
+    try:
+        with np.load(path) as data:
+            arrays = {k: data[k] for k in data.files}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
+        raise InputError(f"shard {path} is corrupt or truncated ({type(err).__name__}); delete it "
+                         "and run `riskmap collect ... --resume` to write it again") from None
+    return arrays
+
+
+class DemoDataset(_TorchDataset):
+    """Training windows of a collected dataset (see the module docstring for a sample's keys).
+
+    `raster`: the raster configuration the caller needs (for instance a checkpoint's); it must
+    equal the dataset's, since the extent was chosen with the scenario family at collection.
+    """
+
+    def __init__(self, root: str | Path, resolution: int = 50, raster: RasterConfig | None = None,
+                 sigma_x: float = 0.5, sigma_y: float = 1.5, goal_variance: float = 5.0):
+        self.root = Path(root)
+        self.manifest = load_manifest(self.root)
+        collected = RasterConfig.from_dict(self.manifest["config"]["raster"])
+        if raster is not None and raster != collected:
+            raise InputError(
+                f"dataset {self.root} was collected with raster config {collected} but {raster} "
+                "is required; collect a dataset with the matching extent or use a matching model"
+            )
+        self.raster_config = collected
+        self.grid = collected.grid(resolution)
+        self.sigma_x, self.sigma_y, self.goal_variance = sigma_x, sigma_y, goal_variance
+        self.source = self.manifest["config"]["env_id"]
+        try:
+            index = json.loads((self.root / INDEX).read_text())
+        except (OSError, ValueError):
+            raise InputError(f"{self.root / INDEX} is missing or unreadable; run "
+                             "`riskmap collect ... --resume` to rebuild it") from None
+        self._shards: list[dict[str, np.ndarray]] = []
+        self._items: list[tuple[int, int]] = []
+        for entry in index["shards"]:
+            if entry["windows"] == 0:
+                continue
+            path = self.root / entry["file"]
+            arrays = _load_shard(path)
+            count = check_packed(arrays, str(path))
+            if count != entry["windows"]:
+                raise InputError(f"shard {path} holds {count} windows but the index says "
+                                 f"{entry['windows']}; run `riskmap collect ... --resume`")
+            self._items.extend((len(self._shards), i) for i in range(count))
+            self._shards.append(arrays)
+        if not self._items:
+            raise InputError(f"dataset {self.root} holds no windows; collect more episodes")
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    def scene(self, index: int) -> Scene:
+        shard, local = self._items[index]
+        return unpack_scene(self._shards[shard], local, source=self.source)
+
+    def __getitem__(self, index: int) -> dict:
+        import torch
+
+        scene = self.scene(index)
+        origin, heading = ego_pose(scene)
+        counts, goal = demo_visitation(scene, self.grid)
+        goal_cell = tuple(int(v) for v in np.argwhere(goal)[0])
+        sample = {
+            "raster": rasterize_scene(scene, self.raster_config).astype(np.float32) / 255.0,
+            "motion": motion_features(scene, self.grid),
+            "demo": np.stack([counts, goal]),
+            "uncertainty": uncertainty_map(scene, self.grid, self.sigma_x, self.sigma_y),
+            "goal_map": goal_map(goal_cell, self.grid, self.goal_variance),
+            "start_cell": np.array(self._start_cell(), dtype=np.int64),
+            "future": ego_from_world(scene.ego_future_xy(), origin, heading).astype(np.float32),
+        }
+        return {k: torch.from_numpy(np.ascontiguousarray(v)) for k, v in sample.items()}
+
+    def _start_cell(self) -> tuple[int, int]:
+        from rasterize.maps import start_cell
+
+        return start_cell(self.grid)

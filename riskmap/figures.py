@@ -1,0 +1,90 @@
+"""PNG figures of scenes: the BEV raster as a colour picture with the future path on top."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from rasterize.config import RasterConfig
+from rasterize.frames import ego_from_world, ego_pose
+from rasterize.raster import CHANNEL_INDEX, rasterize_scene
+from rasterize.scene import Scene
+
+# Colours (RGB in [0, 1]) of the raster layers, painted in this order.
+_PALETTE = (
+    ("drivable", (0.36, 0.38, 0.42)),
+    ("lane_centre", (0.45, 0.60, 0.80)),
+    ("lane_dashed", (0.92, 0.92, 0.92)),
+    ("lane_solid", (1.00, 1.00, 1.00)),
+    ("agents_history", (0.30, 0.55, 1.00)),
+    ("ego_history", (1.00, 0.45, 0.35)),
+    ("agents", (0.15, 0.45, 1.00)),
+    ("ego", (0.95, 0.15, 0.10)),
+)
+_BACKGROUND = (0.10, 0.11, 0.12)
+
+
+def raster_to_rgb(raster: np.ndarray) -> np.ndarray:
+    """uint8 [C, H, W] raster into an RGB float image [H, W, 3]: each layer alpha-blended on top."""
+    rgb = np.broadcast_to(np.array(_BACKGROUND), raster.shape[1:] + (3,)).copy()
+    for name, colour in _PALETTE:
+        alpha = raster[CHANNEL_INDEX[name]].astype(np.float64)[..., None] / 255.0
+        rgb = rgb * (1 - alpha) + np.array(colour) * alpha
+    return rgb
+
+
+def save_scene_png(scene: Scene, config: RasterConfig, path: Path, title: str = "") -> Path:
+    """Write the scene's raster with the ego's recorded future (if any) overlaid, labelled."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    ext = config.extent
+    fig, ax = plt.subplots(figsize=(6.2, 6.4), dpi=110)
+    ax.imshow(raster_to_rgb(rasterize_scene(scene, config)), interpolation="nearest",
+              extent=(ext.left_m, -ext.right_m, -ext.back_m, ext.front_m), aspect="auto")
+    handles = [Patch(color=c, label=n.replace("_", " ")) for n, c in _PALETTE if n != "lane_centre"]
+    if scene.num_future_steps and scene.valid[scene.ego_index, scene.current_index + 1:].all():
+        origin, heading = ego_pose(scene)
+        future = ego_from_world(scene.ego_future_xy(), origin, heading)
+        path_xy = np.concatenate([[[0.0, 0.0]], future])
+        ax.plot(path_xy[:, 1], path_xy[:, 0], "-", color="#3ddc84", lw=1.6)
+        ax.plot(future[:, 1], future[:, 0], "o", color="#3ddc84", ms=3.5)
+        handles.append(Line2D([], [], color="#3ddc84", marker="o", ms=3.5,
+                              label=f"future {scene.num_future_steps * scene.dt:.0f} s"))
+    ax.set_xlim(ext.left_m, -ext.right_m)
+    ax.set_ylim(-ext.back_m, ext.front_m)
+    ax.set_xlabel("lateral y (m, + left of ego)")
+    ax.set_ylabel("forward x (m)")
+    stretch = (ext.length_m / config.rows) / (ext.width_m / config.cols)
+    note = f"  [lateral axis stretched x{stretch:.1f}]" if stretch > 1.5 else ""
+    speed = scene.ego_state()[4]
+    ax.set_title((title + "\n" if title else "") + f"ego {speed:.1f} m/s, "
+                 f"{int(scene.valid[:, scene.current_index].sum()) - 1} other agents{note}",
+                 fontsize=9)
+    ax.legend(handles=handles, loc="upper right", fontsize=6.5, framealpha=0.8)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def scene_figures(data: Path, out: Path, count: int) -> list[Path]:
+    """PNGs of `count` windows spread evenly over a dataset."""
+    from riskmap.data import DemoDataset
+
+    dataset = DemoDataset(data)
+    picks = np.unique(np.linspace(0, len(dataset) - 1, min(count, len(dataset))).astype(int))
+    paths = []
+    for i in picks:
+        scene = dataset.scene(int(i))
+        title = f"{dataset.source}  window {i}  t = {scene.time_s:.1f} s"
+        paths.append(save_scene_png(scene, dataset.raster_config, Path(out) / f"scene_{i:05d}.png",
+                                    title))
+    return paths
