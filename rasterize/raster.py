@@ -38,7 +38,37 @@ def _cv_points(colrow: np.ndarray) -> np.ndarray:
     return np.round((colrow - 0.5) * _SCALE).astype(np.int32)
 
 
+def _shrink_box(corners: np.ndarray) -> np.ndarray:
+    """Pull a box's edges in by half a pixel (see `_fill`); a box thinner than a pixel keeps a line.
+
+    corners [4, 2] in pixel space, in order around the box (a parallelogram after scaling).
+    """
+    centre = corners.mean(axis=0)
+    a = 0.5 * (corners[0] - corners[3])   # half-axis along the box's length
+    b = 0.5 * (corners[0] - corners[1])   # half-axis along its width
+    area = abs(a[0] * b[1] - a[1] * b[0])
+    if area < 1e-12:
+        return corners
+    a2 = a * max(0.0, 1.0 - 0.5 * np.linalg.norm(b) / area)
+    b2 = b * max(0.0, 1.0 - 0.5 * np.linalg.norm(a) / area)
+    return np.stack([centre + a2 + b2, centre + a2 - b2, centre - a2 - b2, centre - a2 + b2])
+
+
+def _shrink_strip(left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Pull the two sides of a lane strip [P, 2] towards each other by half a pixel each."""
+    across = right - left
+    norm = np.linalg.norm(across, axis=1, keepdims=True)
+    step = np.minimum(0.5, 0.5 * norm) * across / np.maximum(norm, 1e-12)
+    return left + step, right - step
+
+
 def _fill(canvas: np.ndarray, polygon_colrow: np.ndarray, value: int) -> None:
+    """Fill a polygon given in continuous (col, row) pixel coordinates.
+
+    OpenCV paints every pixel whose centre lies within half a pixel of the polygon; callers pull
+    edges in by half a pixel first (`_shrink_box`, `_shrink_strip`), so that a pixel is painted
+    when its centre lies inside the shape, and a 4 m box on 1 m pixels covers exactly 4 pixels.
+    """
     cv2.fillPoly(canvas, [_cv_points(polygon_colrow)], int(value), lineType=cv2.LINE_8, shift=_SHIFT)
 
 
@@ -71,7 +101,8 @@ def _dashes(line_ego: np.ndarray, start_s: float) -> list[np.ndarray]:
 def _draw_lane(layers: np.ndarray, lane: Lane, origin: np.ndarray, heading: float,
                config: RasterConfig) -> None:
     to_px = lambda pts: pixel_from_ego(ego_from_world(pts, origin, heading), config)  # noqa: E731
-    _fill(layers[CHANNEL_INDEX["drivable"]], to_px(lane.polygon()), 255)
+    left, right = _shrink_strip(to_px(lane.left), to_px(lane.right))
+    _fill(layers[CHANNEL_INDEX["drivable"]], np.concatenate([left, right[::-1]]), 255)
     _polyline(layers[CHANNEL_INDEX["lane_centre"]], to_px(lane.centre))
     for boundary, line in ((lane.left, lane.left_line), (lane.right, lane.right_line)):
         if line in (LineType.SOLID, LineType.SOLID_THICK):
@@ -86,7 +117,7 @@ def _box_px(scene: Scene, agent: int, step: int, origin: np.ndarray, heading: fl
     state = scene.states[agent, step]
     length, width = scene.sizes[agent]
     corners = box_corners(state[:2], state[2:4], length, width)
-    return pixel_from_ego(ego_from_world(corners, origin, heading), config)
+    return _shrink_box(pixel_from_ego(ego_from_world(corners, origin, heading), config))
 
 
 def history_intensity(age_s: float, history_s: float, dt: float) -> int:
