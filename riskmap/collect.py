@@ -74,6 +74,7 @@ class CollectConfig:
     future_s: float = 6.0
     window_dt_s: float = 0.5
     window_stride_s: float = 1.0
+    crash_margin_s: float = 2.0        # drop windows whose future ends this close to an ego crash
     scene_radius_m: float = 120.0
     max_agents: int = 32
     raster: RasterConfig | None = None
@@ -110,8 +111,14 @@ def episode_seed(seed: int, episode: int) -> int:
 
 
 def _make_env(config: CollectConfig):
+    import warnings
+
     import gymnasium as gym
     import highway_env  # noqa: F401  (registers the envs)
+
+    # The -v0 ids are the ones this toolkit is built and benchmarked on; silence gymnasium's
+    # notice that newer versions exist.
+    warnings.filterwarnings("ignore", message=".*is out of date.*", category=DeprecationWarning)
 
     env_config = {"simulation_frequency": config.record_hz, "policy_frequency": 1,
                   "duration": config.setup.episode_s}
@@ -191,6 +198,8 @@ def run_episode(env, config: CollectConfig, episode: int):
     stride = int(round(config.window_stride_s * config.record_hz))
     first = int(round(config.history_s * config.record_hz))
     last = recorder.num_steps - 1 - int(round(config.future_s * config.record_hz))
+    if crashed:  # a driver heading into a crash is no demonstration to learn from
+        last -= int(round(config.crash_margin_s * config.record_hz))
     windows = [
         recorder.scene(step, config.history_s, config.future_s, config.window_dt_s,
                        config.scene_radius_m, config.max_agents, source=config.env_id)

@@ -1,0 +1,66 @@
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from rasterize.config import Extent, RasterConfig
+from rasterize.errors import InputError
+from rasterize.raster import CHANNELS
+from riskmap.collect import CollectConfig, collect, shard_path
+from riskmap.data import DemoDataset
+
+
+@pytest.fixture(scope="module")
+def dataset_dir(tmp_path_factory):
+    d = tmp_path_factory.mktemp("data") / "highway"
+    collect(CollectConfig("highway-v0", episodes=1, seed=0), d, progress=False)
+    return d
+
+
+@pytest.mark.parametrize("resolution", [25, 50])
+def test_samples_have_the_documented_shapes(dataset_dir, resolution):
+    ds = DemoDataset(dataset_dir, resolution=resolution)
+    assert len(ds) == 33                              # 40 s episode: windows at t = 2 .. 34 s
+    sample = ds[5]
+    g = resolution
+    assert sample["raster"].shape == (len(CHANNELS), 200, 200)
+    assert sample["motion"].shape == (3, g, g) and sample["demo"].shape == (2, g, g)
+    assert sample["uncertainty"].shape == (g, g) and sample["goal_map"].shape == (g, g)
+    assert sample["future"].shape == (12, 2) and sample["start_cell"].dtype == torch.int64
+    for value in sample.values():
+        assert torch.isfinite(value.float()).all()
+    # D_demo starts at the ego's cell and ends at the goal map's peak.
+    r, c = sample["start_cell"].tolist()
+    assert sample["demo"][0, r, c] >= 1
+    goal = torch.nonzero(sample["demo"][1])[0].tolist()
+    assert sample["goal_map"][goal[0], goal[1]] == pytest.approx(1.0)
+    # Highway ego drives forward: its last waypoint is well ahead.
+    assert sample["future"][-1, 0] > 50.0
+
+
+def test_batches_through_a_dataloader(dataset_dir):
+    loader = torch.utils.data.DataLoader(DemoDataset(dataset_dir), batch_size=4)
+    batch = next(iter(loader))
+    assert batch["raster"].shape[0] == 4 and batch["demo"].shape == (4, 2, 50, 50)
+
+
+def test_another_raster_config_is_refused(dataset_dir):
+    other = RasterConfig(Extent(60.0, 20.0, 40.0, 40.0))
+    with pytest.raises(InputError, match="collected with raster config"):
+        DemoDataset(dataset_dir, raster=other)
+
+
+def test_corrupt_and_empty_shards_are_named(tmp_path, dataset_dir):
+    import shutil
+
+    d = tmp_path / "copy"
+    shutil.copytree(dataset_dir, d)
+    shard_path(d, 0).write_bytes(b"")
+    with pytest.raises(InputError, match="episode_000000.npz is corrupt"):
+        DemoDataset(d)
+    shard_path(d, 0).unlink()
+    with pytest.raises(InputError, match="missing"):
+        DemoDataset(d)
+    with pytest.raises(InputError, match="not a dataset"):
+        DemoDataset(tmp_path / "nowhere")
