@@ -1,0 +1,94 @@
+"""Soft value iteration and state visitation on the risk-map grid (DESIGN §3).
+
+Shapes: reward, goal, value [B, H, W]; policy [B, 5, H, W] over ACTIONS; start_cells [B, 2]
+(row, col). Row 0 is the front of the grid, so "up" (row - 1) is forward.
+
+    V⁰ = −∞;  Qⁿ(s, move a) = r(s) + γ Vⁿ⁻¹(next(s, a));  Qⁿ(s, end) = r(s) + γ g(s)
+    Vⁿ(s) = logsumexp_a Qⁿ(s, a);  π(a | s) = exp(Q^N(s, a) − V^N(s))
+
+Moves off the grid do not exist. −∞ is represented by a large finite negative (`neg_value`) so
+that no arithmetic ever makes NaN; every Q is clamped into [neg, −neg] so that sums of huge
+rewards cannot overflow to ±inf either.
+"""
+
+from __future__ import annotations
+
+import torch
+
+ACTIONS = ("up", "down", "left", "right", "end")
+UP, DOWN, LEFT, RIGHT, END = range(5)
+# (d_row, d_col) of each move
+MOVES = {UP: (-1, 0), DOWN: (1, 0), LEFT: (0, -1), RIGHT: (0, 1)}
+
+
+def neg_value(dtype: torch.dtype) -> float:
+    """The finite stand-in for −∞: far below any real value, far above overflow."""
+    return -1e30 if dtype in (torch.float32, torch.float64) else -1e4
+
+
+def _shifted_values(value: torch.Tensor, neg: float) -> torch.Tensor:
+    """[B, 4, H, W]: V at the cell each move leads to, NEG where the move leaves the grid."""
+    b, h, w = value.shape
+    out = value.new_full((b, 4, h, w), neg)
+    out[:, UP, 1:, :] = value[:, :-1, :]
+    out[:, DOWN, :-1, :] = value[:, 1:, :]
+    out[:, LEFT, :, 1:] = value[:, :, :-1]
+    out[:, RIGHT, :, :-1] = value[:, :, 1:]
+    return out
+
+
+def _check(reward: torch.Tensor, goal: torch.Tensor, horizon: int) -> None:
+    if reward.ndim != 3 or goal.shape != reward.shape:
+        raise ValueError(f"reward and goal must both be [B, H, W]; got {tuple(reward.shape)} and "
+                         f"{tuple(goal.shape)}")
+    if horizon < 1:
+        raise ValueError(f"horizon must be >= 1, got {horizon}")
+    if not (torch.isfinite(reward).all() and torch.isfinite(goal).all()):
+        raise ValueError("reward and goal maps must be finite (no NaN or inf)")
+
+
+def soft_value_iteration(reward: torch.Tensor, goal: torch.Tensor, horizon: int,
+                         gamma: float = 1.0) -> tuple[torch.Tensor, torch.Tensor]:
+    """(value [B, H, W], policy [B, 5, H, W]) after `horizon` soft Bellman backups."""
+    _check(reward, goal, horizon)
+    neg = neg_value(reward.dtype)
+    q_end = reward + gamma * goal
+    value = reward.new_full(reward.shape, neg)
+    q = None
+    for _ in range(horizon):
+        q_moves = reward.unsqueeze(1) + gamma * _shifted_values(value, neg)
+        q = torch.cat([q_moves, q_end.unsqueeze(1)], dim=1).clamp(neg, -neg)
+        value = torch.logsumexp(q, dim=1)
+    policy = torch.exp(q - value.unsqueeze(1))
+    return value, policy
+
+
+def state_visitation(policy: torch.Tensor, start_cells: torch.Tensor, horizon: int
+                     ) -> tuple[torch.Tensor, torch.Tensor]:
+    """Expected visits (svf_path [B, H, W]) and end probabilities (svf_goal [B, H, W]).
+
+    Mass starts one-hot at `start_cells`; each of `horizon` steps counts the mass on the path
+    layer as a visit, sends the `end` share to the goal layer and moves the rest by the policy.
+    Mass still on the path layer afterwards is 1 − svf_goal.sum().
+    """
+    b, a, h, w = policy.shape
+    if a != len(ACTIONS):
+        raise ValueError(f"policy must be [B, 5, H, W], got {tuple(policy.shape)}")
+    start_cells = torch.as_tensor(start_cells, device=policy.device).long().reshape(b, 2)
+    if ((start_cells < 0) | (start_cells >= torch.tensor([h, w], device=policy.device))).any():
+        raise ValueError(f"start cells {start_cells.tolist()} lie outside the {h}x{w} grid")
+    mass = policy.new_zeros((b, h, w))
+    mass[torch.arange(b), start_cells[:, 0], start_cells[:, 1]] = 1.0
+    svf_path = torch.zeros_like(mass)
+    svf_goal = torch.zeros_like(mass)
+    for _ in range(horizon):
+        svf_path = svf_path + mass
+        svf_goal = svf_goal + mass * policy[:, END]
+        flow = mass.unsqueeze(1) * policy[:, :END]
+        nxt = torch.zeros_like(mass)
+        nxt[:, :-1, :] += flow[:, UP, 1:, :]
+        nxt[:, 1:, :] += flow[:, DOWN, :-1, :]
+        nxt[:, :, :-1] += flow[:, LEFT, :, 1:]
+        nxt[:, :, 1:] += flow[:, RIGHT, :, :-1]
+        mass = nxt
+    return svf_path, svf_goal
