@@ -41,19 +41,26 @@ def uncertainty_map(scene: Scene, grid: GridConfig, sigma_x: float = 0.5,
     origin, heading = ego_pose(scene)
     now = scene.current_index
     ados = [a for a in np.flatnonzero(scene.valid[:, now]) if a != scene.ego_index]
-    points = cell_centres_ego(grid)[:, :, None, :] + _subcell_offsets(grid)  # [R, C, S, 2]
-    density = np.zeros(points.shape[:3])
+    centres = cell_centres_ego(grid)
+    offsets = _subcell_offsets(grid)
+    density = np.zeros((grid.rows, grid.cols, offsets.shape[0]))
+    # Only cells within 4 sigma (plus a cell) of an agent can hold more than e^-8 of it.
     reach = 4.0 * max(sigma_x, sigma_y) + max(grid.row_m, grid.col_m)
     for agent in ados:
         centre = ego_from_world(scene.states[agent, now, :2], origin, heading)
+        (r0, c0), (r1, c1) = (grid_from_ego(centre + [reach, reach], grid),
+                              grid_from_ego(centre - [reach, reach], grid))
+        r0, c0 = max(r0, 0), max(c0, 0)
+        r1, c1 = min(r1, grid.rows - 1), min(c1, grid.cols - 1)
+        if r0 > r1 or c0 > c1:
+            continue
         rel_heading = heading_angle(scene.states[agent, now, 2:4]) - heading
-        d = points - centre
+        d = centres[r0:r1 + 1, c0:c1 + 1, None, :] + offsets - centre
         along = d[..., 0] * np.cos(rel_heading) + d[..., 1] * np.sin(rel_heading)
         across = -d[..., 0] * np.sin(rel_heading) + d[..., 1] * np.cos(rel_heading)
-        if np.hypot(along, across).min() > reach:
-            continue
         g = np.exp(-0.5 * ((along / sigma_y) ** 2 + (across / sigma_x) ** 2))
-        np.maximum(density, g, out=density)
+        window = density[r0:r1 + 1, c0:c1 + 1]
+        np.maximum(window, g, out=window)
     return density.mean(axis=2).astype(np.float32)
 
 
@@ -69,26 +76,26 @@ def goal_map(goal_cell: tuple[int, int], grid: GridConfig, variance: float = 5.0
 def _densify(points_ego: np.ndarray, grid: GridConfig) -> list[tuple[int, int]]:
     """Cells a polyline passes through, as a 4-connected path, stopping where it leaves the grid."""
     step = 0.25 * min(grid.row_m, grid.col_m)
-    path: list[tuple[int, int]] = []
+    pieces = []
     for a, b in zip(points_ego[:-1], points_ego[1:]):
         n = max(1, int(np.ceil(np.linalg.norm(b - a) / step)))
-        t = np.linspace(0.0, 1.0, n + 1)[:, None]
-        samples = a + t * (b - a)
-        cells = grid_from_ego(samples, grid)
-        for point, cell in zip(samples, cells):
-            if not in_grid(cell, grid):
-                return path
-            cell = (int(cell[0]), int(cell[1]))
-            if path and cell == path[-1]:
-                continue
-            if path and abs(cell[0] - path[-1][0]) + abs(cell[1] - path[-1][1]) > 1:
-                # A diagonal step (the segment crossed a cell corner): go through whichever of
-                # the two side cells is nearer the point, keeping the path 4-connected.
-                r0, c0 = path[-1]
-                options = [(cell[0], c0), (r0, cell[1])]
-                best = min(options, key=lambda rc: np.linalg.norm(ego_from_grid(rc, grid) - point))
-                path.append(best)
-            path.append(cell)
+        pieces.append(a + np.linspace(0.0, 1.0, n + 1)[:-1, None] * (b - a))
+    samples = np.concatenate(pieces + [points_ego[-1:]])
+    cells = grid_from_ego(samples, grid)
+    outside = np.flatnonzero(~in_grid(cells, grid))
+    if outside.size:
+        samples, cells = samples[: outside[0]], cells[: outside[0]]
+    changed = np.concatenate([[True], (np.diff(cells, axis=0) != 0).any(axis=1)])
+    path: list[tuple[int, int]] = []
+    for point, cell in zip(samples[changed], cells[changed]):
+        cell = (int(cell[0]), int(cell[1]))
+        if path and abs(cell[0] - path[-1][0]) + abs(cell[1] - path[-1][1]) > 1:
+            # A diagonal step (the segment crossed a cell corner): go through whichever of the
+            # two side cells is nearer the point, keeping the path 4-connected.
+            r0, c0 = path[-1]
+            options = [(cell[0], c0), (r0, cell[1])]
+            path.append(min(options, key=lambda rc: np.linalg.norm(ego_from_grid(rc, grid) - point)))
+        path.append(cell)
     return path
 
 

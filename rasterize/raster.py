@@ -10,7 +10,7 @@ import cv2
 import numpy as np
 
 from rasterize.config import RasterConfig
-from rasterize.frames import box_corners, ego_from_world, ego_pose, pixel_from_ego
+from rasterize.frames import ego_from_world, ego_pose, pixel_from_ego
 from rasterize.scene import Lane, LineType, Scene
 
 CHANNELS: tuple[str, ...] = (
@@ -72,52 +72,94 @@ def _fill(canvas: np.ndarray, polygon_colrow: np.ndarray, value: int) -> None:
     cv2.fillPoly(canvas, [_cv_points(polygon_colrow)], int(value), lineType=cv2.LINE_8, shift=_SHIFT)
 
 
-def _polyline(canvas: np.ndarray, colrow: np.ndarray, value: int = 255) -> None:
-    cv2.polylines(canvas, [_cv_points(colrow)], False, int(value), 1, cv2.LINE_8, _SHIFT)
+def _polylines(canvas: np.ndarray, lines: list[np.ndarray], value: int = 255) -> None:
+    if lines:
+        cv2.polylines(canvas, [_cv_points(p) for p in lines], False, int(value), 1, cv2.LINE_8,
+                      _SHIFT)
 
 
-def _dashes(line_ego: np.ndarray, start_s: float) -> list[np.ndarray]:
-    """Split a polyline [P, 2] into its painted dashes, phase anchored at the lane's arc length."""
-    seg = np.linalg.norm(np.diff(line_ego, axis=0), axis=1)
+# Arc-length spacing (m) at which dashed boundaries are resampled before cutting into dashes.
+_DASH_SAMPLE_M = 0.5
+
+
+def _dashes(line: np.ndarray, start_s: float) -> list[np.ndarray]:
+    """Cut a polyline [P, 2] into its painted dashes, phase anchored at the lane's arc length."""
+    seg = np.linalg.norm(np.diff(line, axis=0), axis=1)
     s = start_s + np.concatenate([[0.0], np.cumsum(seg)])
-    if s[-1] <= s[0]:
+    if s[-1] - s[0] < 1e-9:
         return []
+    # Sample every _DASH_SAMPLE_M and at every dash end, then keep the painted runs.
     first = np.floor(s[0] / DASH_PERIOD_M) * DASH_PERIOD_M
-    dashes = []
-    for a in np.arange(first, s[-1], DASH_PERIOD_M):
-        lo, hi = max(a, s[0]), min(a + DASH_ON_M, s[-1])
-        if hi <= lo:
-            continue
-        inner = (s > lo) & (s < hi)
-        pts = np.concatenate([
-            [[np.interp(lo, s, line_ego[:, 0]), np.interp(lo, s, line_ego[:, 1])]],
-            line_ego[inner],
-            [[np.interp(hi, s, line_ego[:, 0]), np.interp(hi, s, line_ego[:, 1])]],
-        ])
-        dashes.append(pts)
-    return dashes
+    starts = np.arange(first, s[-1], DASH_PERIOD_M)
+    knots = np.concatenate([np.arange(s[0], s[-1], _DASH_SAMPLE_M), starts, starts + DASH_ON_M,
+                            [s[-1]]])
+    knots = np.unique(knots[(knots >= s[0]) & (knots <= s[-1])])
+    phase = np.mod(knots - first, DASH_PERIOD_M)
+    painted = phase <= DASH_ON_M + 1e-9
+    # A run starts where painting starts or where a new period begins (phase wraps to 0).
+    new_run = painted & np.concatenate([[True], ~painted[:-1] | (phase[1:] < phase[:-1])])
+    run_id = np.cumsum(new_run)
+    pts = np.stack([np.interp(knots, s, line[:, 0]), np.interp(knots, s, line[:, 1])], axis=1)
+    ids = run_id[painted]
+    pts = pts[painted]
+    cuts = np.flatnonzero(np.diff(ids)) + 1
+    return [run for run in np.split(pts, cuts) if len(run) >= 2]
+
+
+def _inside(colrow: np.ndarray, config: RasterConfig, margin: float = 2.0) -> np.ndarray:
+    return ((colrow[:, 0] > -margin) & (colrow[:, 0] < config.cols + margin)
+            & (colrow[:, 1] > -margin) & (colrow[:, 1] < config.rows + margin))
+
+
+def _visible(colrow: np.ndarray, config: RasterConfig) -> bool:
+    return bool(_inside(colrow, config).any())
 
 
 def _draw_lane(layers: np.ndarray, lane: Lane, origin: np.ndarray, heading: float,
                config: RasterConfig) -> None:
-    to_px = lambda pts: pixel_from_ego(ego_from_world(pts, origin, heading), config)  # noqa: E731
-    left, right = _shrink_strip(to_px(lane.left), to_px(lane.right))
-    _fill(layers[CHANNEL_INDEX["drivable"]], np.concatenate([left, right[::-1]]), 255)
-    _polyline(layers[CHANNEL_INDEX["lane_centre"]], to_px(lane.centre))
-    for boundary, line in ((lane.left, lane.left_line), (lane.right, lane.right_line)):
+    # One transform per polyline; everything below works in pixel coordinates.
+    left, right, centre = (pixel_from_ego(ego_from_world(p, origin, heading), config)
+                           for p in (lane.left, lane.right, lane.centre))
+    if not (_visible(left, config) or _visible(right, config)
+            or _visible(np.concatenate([left, right]).mean(axis=0, keepdims=True), config)):
+        # Both sides outside: the lane may still cross the raster between far-apart samples.
+        box = np.concatenate([left, right])
+        if (box[:, 0].max() < 0 or box[:, 0].min() > config.cols or box[:, 1].max() < 0
+                or box[:, 1].min() > config.rows):
+            return
+    in_left, in_right = _shrink_strip(left, right)
+    _fill(layers[CHANNEL_INDEX["drivable"]], np.concatenate([in_left, in_right[::-1]]), 255)
+    _polylines(layers[CHANNEL_INDEX["lane_centre"]], [centre])
+    for boundary_world, boundary, line in ((lane.left, left, lane.left_line),
+                                           (lane.right, right, lane.right_line)):
         if line in (LineType.SOLID, LineType.SOLID_THICK):
-            _polyline(layers[CHANNEL_INDEX["lane_solid"]], to_px(boundary))
+            _polylines(layers[CHANNEL_INDEX["lane_solid"]], [boundary])
         elif line == LineType.DASHED:
-            for dash in _dashes(boundary, lane.start_s):
-                _polyline(layers[CHANNEL_INDEX["lane_dashed"]], to_px(dash))
+            # Dash lengths are metres along the lane: cut in the world, draw in pixels.
+            dashes = _dashes(boundary_world, lane.start_s)
+            if not dashes:
+                continue
+            px = pixel_from_ego(ego_from_world(np.concatenate(dashes), origin, heading), config)
+            bounds = np.cumsum([0] + [len(d) for d in dashes])
+            inside = _inside(px, config).astype(np.int64)
+            shown = np.add.reduceat(inside, bounds[:-1]) > 0
+            _polylines(layers[CHANNEL_INDEX["lane_dashed"]],
+                       [px[a:b] for a, b, keep in zip(bounds[:-1], bounds[1:], shown) if keep])
 
 
-def _box_px(scene: Scene, agent: int, step: int, origin: np.ndarray, heading: float,
-            config: RasterConfig) -> np.ndarray:
-    state = scene.states[agent, step]
-    length, width = scene.sizes[agent]
-    corners = box_corners(state[:2], state[2:4], length, width)
-    return _shrink_box(pixel_from_ego(ego_from_world(corners, origin, heading), config))
+def _boxes_px(scene: Scene, origin: np.ndarray, heading: float, config: RasterConfig
+              ) -> np.ndarray:
+    """Pixel corners [N, T, 4, 2] of every agent's box at every time step (one transform)."""
+    states = scene.states
+    fwd = states[..., 2:4] / np.maximum(np.linalg.norm(states[..., 2:4], axis=-1, keepdims=True),
+                                        1e-12)
+    left = np.stack([-fwd[..., 1], fwd[..., 0]], axis=-1)
+    half_l = 0.5 * scene.sizes[:, None, None, 0:1] * fwd[..., None, :]
+    half_w = 0.5 * scene.sizes[:, None, None, 1:2] * left[..., None, :]
+    signs_l = np.array([1, 1, -1, -1])[:, None]
+    signs_w = np.array([1, -1, -1, 1])[:, None]
+    corners = states[..., None, 0:2] + signs_l * half_l + signs_w * half_w   # [N, T, 4, 2]
+    return pixel_from_ego(ego_from_world(corners, origin, heading), config)
 
 
 def history_intensity(age_s: float, history_s: float, dt: float) -> int:
@@ -134,6 +176,7 @@ def rasterize_scene(scene: Scene, config: RasterConfig) -> np.ndarray:
 
     now, ego = scene.current_index, scene.ego_index
     oldest = max(0, now - int(round(config.history_s / scene.dt)))
+    boxes = _boxes_px(scene, origin, heading, config)
     for step in range(oldest, now + 1):  # oldest first: newer, brighter boxes overwrite
         age = (now - step) * scene.dt
         value = history_intensity(age, config.history_s, scene.dt)
@@ -144,6 +187,5 @@ def rasterize_scene(scene: Scene, config: RasterConfig) -> np.ndarray:
                 value = 255
             else:
                 channel = "ego_history" if is_ego else "agents_history"
-            _fill(layers[CHANNEL_INDEX[channel]], _box_px(scene, agent, step, origin, heading, config),
-                  value)
+            _fill(layers[CHANNEL_INDEX[channel]], _shrink_box(boxes[agent, step]), value)
     return layers
