@@ -89,6 +89,62 @@ def lanes_near(network, centre_world: np.ndarray, sampling: LaneSampling = LaneS
     return tuple(lanes)
 
 
+@dataclass(frozen=True)
+class RouteRule:
+    """Where the planner is sent: along the ego's route, as far as it could get in `horizon_s`.
+
+    distance = min(speed_limit x horizon, speed x horizon + accel x horizon² / 2): the ego keeps
+    its speed and gains `accel_mps2` until the lane's speed limit, so a stopped ego still gets a
+    goal ahead and a fast one is not sent beyond the limit. Used alike for training goal maps and
+    in closed loop, from present information only.
+    """
+
+    horizon_s: float = 6.0
+    accel_mps2: float = 1.0
+    points: int = 13          # samples from the ego (distance 0) to the goal, evenly spaced
+
+
+def _route_lanes(network, vehicle, length_needed: float) -> list:
+    """The lane indices the vehicle will follow: its planned route, else straight-on successors."""
+    route = [vehicle.lane_index]
+    planned = [idx for idx in (vehicle.route or []) if idx[:2] != vehicle.lane_index[:2]]
+    for _from, _to, lane_id in planned:
+        # Resolve unspecified lanes here: highway-env checks the id against the wrong segment.
+        n_lanes = len(network.graph[_from][_to])
+        keep = route[-1][2] if lane_id is None else lane_id
+        route.append((_from, _to, min(keep, n_lanes - 1)))
+    total = network.get_lane(vehicle.lane_index).length
+    while not planned and total < length_needed:
+        _from, _to, lane_id = route[-1]
+        successors = sorted(network.graph.get(_to, {}).keys())
+        if not successors:
+            break
+        nxt = successors[0]
+        ids = len(network.graph[_to][nxt])
+        route.append((_to, nxt, lane_id if lane_id < ids else ids - 1))
+        total += network.get_lane(route[-1]).length
+        if len(route) > 50:
+            break
+    return route
+
+
+def route_ahead(road, vehicle, rule: RouteRule = RouteRule()) -> np.ndarray:
+    """[rule.points, 2] world points along the vehicle's route, from it to its goal (see RouteRule)."""
+    network = road.network
+    lane = network.get_lane(vehicle.lane_index)
+    speed = max(float(vehicle.speed), 0.0)
+    limit = float(getattr(lane, "speed_limit", None) or speed or 10.0)
+    t = rule.horizon_s
+    distance = min(limit * t, speed * t + 0.5 * rule.accel_mps2 * t * t)
+    s0 = float(lane.local_coordinates(vehicle.position)[0])
+    route = _route_lanes(network, vehicle, s0 + distance)
+    pts = [network.position_heading_along_route(route, s0 + d, 0.0, vehicle.lane_index)[0]
+           for d in np.linspace(0.0, distance, rule.points)]
+    pts = world_from_highway_env(np.asarray(pts))
+    pts[0] = world_from_highway_env(vehicle.position)   # start exactly at the ego
+    return pts
+
+
 def _wrap(angle: np.ndarray) -> np.ndarray:
     return (angle + np.pi) % (2 * np.pi) - np.pi
 
@@ -106,10 +162,12 @@ class TrafficRecorder:
     are removed simply stop being valid). `scene(...)` cuts a `Scene` out of the record.
     """
 
-    def __init__(self, road, ego, dt_s: float):
+    def __init__(self, road, ego, dt_s: float, route_rule: RouteRule | None = RouteRule()):
         if not dt_s > 0:
             raise InputError(f"TrafficRecorder dt_s must be positive seconds, got {dt_s}")
         self.road, self.ego, self.dt_s = road, ego, float(dt_s)
+        self.route_rule = route_rule
+        self._routes: dict[int, np.ndarray] = {}   # step -> the ego's route ahead
         self._ids: dict[int, int] = {}          # id(vehicle object) -> agent id
         self._alive: list[object] = []          # keeps objects alive so ids are never reused
         self._rows: list[tuple[int, int, np.ndarray]] = []  # (step, agent, state[6])
@@ -147,6 +205,8 @@ class TrafficRecorder:
             state = np.array([pos[0], pos[1], np.cos(heading), np.sin(heading), speed, yaw_rate])
             self._rows.append((step, agent, state))
         self.ego_id  # the ego is always known, even before it moves
+        if self.route_rule is not None and getattr(self.ego, "lane_index", None) is not None:
+            self._routes[step] = route_ahead(self.road, self.ego, self.route_rule)
         self.num_steps += 1
         self._cache = None
 
@@ -196,7 +256,7 @@ class TrafficRecorder:
         lane_set = lanes_near(self.road.network, ego_xy, sampling) if lanes else ()
         return Scene(sel_states, sel_valid, sizes[agents], kinds[agents], ego_index=0,
                      current_index=n_hist, dt=dt_s, lanes=lane_set, source=source,
-                     time_s=step * self.dt_s)
+                     time_s=step * self.dt_s, route_xy=self._routes.get(step))
 
 
 def scene_from_highway_env(env, history_s: float = 2.0, future_s: float = 0.0, *,
@@ -225,6 +285,7 @@ def scene_from_highway_env(env, history_s: float = 2.0, future_s: float = 0.0, *
         recorder = copy.copy(recorder)
         recorder._rows = list(recorder._rows)
         recorder._last_heading = dict(recorder._last_heading)
+        recorder._routes = dict(recorder._routes)
         road = copy.deepcopy(base.road)
         # The copies stand in for the originals: map each copy to its original's agent id.
         recorder._ids = dict(recorder._ids)

@@ -125,6 +125,22 @@ def demo_goal_cell(scene: Scene, grid: GridConfig) -> tuple[int, int]:
     return int(r), int(c)
 
 
+def route_goal_cell(scene: Scene, grid: GridConfig) -> tuple[int, int]:
+    """The planner's goal: the last point of the ego's route ahead that lies inside the grid.
+
+    Without a route (`scene.route_xy` is None) this falls back to the demonstration's goal.
+    """
+    if scene.route_xy is None:
+        return demo_goal_cell(scene, grid)
+    origin, heading = ego_pose(scene)
+    cells = grid_from_ego(ego_from_world(scene.route_xy, origin, heading), grid)
+    inside = np.flatnonzero(in_grid(cells, grid))
+    if inside.size == 0:
+        return start_cell(grid)
+    r, c = cells[inside[-1]]
+    return int(r), int(c)
+
+
 def start_cell(grid: GridConfig) -> tuple[int, int]:
     """The ego's own cell (the ego sits at the ego-frame origin)."""
     r, c = grid_from_ego(np.zeros(2), grid)

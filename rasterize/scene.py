@@ -90,8 +90,16 @@ class Scene:
     lanes: tuple[Lane, ...] = field(default_factory=tuple)
     source: str = ""
     time_s: float = 0.0
+    # The ego's route ahead [K, 2] (world m), from the ego to the point the route rule picks as
+    # its goal (`rasterize.highway.route_ahead`); None when unknown.
+    route_xy: np.ndarray | None = None
 
     def __post_init__(self) -> None:
+        if self.route_xy is not None:
+            route = np.asarray(self.route_xy, dtype=np.float64)
+            if route.ndim != 2 or route.shape[1] != 2 or len(route) < 1 or not np.isfinite(route).all():
+                raise InputError(f"Scene.route_xy must be finite [K>=1, 2], got {route.shape}")
+            object.__setattr__(self, "route_xy", route)
         states = np.asarray(self.states, dtype=np.float64)
         valid = np.asarray(self.valid, dtype=bool)
         sizes = np.asarray(self.sizes, dtype=np.float64)
@@ -157,7 +165,8 @@ class Scene:
         states[..., 2:4] = states[..., 2:4] @ rot_t
         lanes = tuple(replace(lane, centre=lane.centre @ rot_t, left=lane.left @ rot_t,
                               right=lane.right @ rot_t) for lane in self.lanes)
-        return replace(self, states=states, lanes=lanes)
+        route = None if self.route_xy is None else self.route_xy @ rot_t
+        return replace(self, states=states, lanes=lanes, route_xy=route)
 
     def ego_state(self) -> np.ndarray:
         """The ego's current state [6]."""

@@ -9,6 +9,7 @@ lanes stored as concatenated points with offsets:
     point_offsets [L + 1]     points of lane l are point_offsets[l]:point_offsets[l + 1]
     lane_centre, lane_left, lane_right [P, 2] float32
     lane_lines [L, 2] int8 (left, right LineType)   lane_width_m, lane_start_s [L] float32
+    route_xy [W, K, 2] float32, has_route [W] bool   the ego's route ahead (zeros when unknown)
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ from rasterize.scene import STATE_DIM, Lane, Scene
 SCENE_KEYS = (
     "states", "valid", "sizes", "kinds", "ego_index", "current_index", "dt_s", "time_s",
     "lane_offsets", "point_offsets", "lane_centre", "lane_left", "lane_right", "lane_lines",
-    "lane_width_m", "lane_start_s",
+    "lane_width_m", "lane_start_s", "route_xy", "has_route",
 )
 
 
@@ -56,6 +57,14 @@ def pack_scenes(scenes: list[Scene]) -> dict[str, np.ndarray]:
     out["lane_lines"] = np.array([[l.left_line, l.right_line] for l in lanes], np.int8).reshape(-1, 2)
     out["lane_width_m"] = np.array([l.width_m for l in lanes], np.float32)
     out["lane_start_s"] = np.array([l.start_s for l in lanes], np.float32)
+    k = max((len(s.route_xy) for s in scenes if s.route_xy is not None), default=1)
+    out["route_xy"] = np.zeros((w, k, 2), np.float32)
+    out["has_route"] = np.array([s.route_xy is not None for s in scenes])
+    for i, s in enumerate(scenes):
+        if s.route_xy is not None:
+            if len(s.route_xy) != k:
+                raise InputError("scenes of one shard must share their route length")
+            out["route_xy"][i] = s.route_xy
     return out
 
 
@@ -100,4 +109,5 @@ def unpack_scene(arrays: dict[str, np.ndarray], index: int, source: str = "") ->
         kinds=arrays["kinds"][index, keep], ego_index=int(np.searchsorted(keep, ego)),
         current_index=int(arrays["current_index"][index]), dt=float(arrays["dt_s"][index]),
         lanes=tuple(lanes), source=source, time_s=float(arrays["time_s"][index]),
+        route_xy=arrays["route_xy"][index] if arrays["has_route"][index] else None,
     )

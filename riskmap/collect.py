@@ -24,7 +24,7 @@ from rasterize.scene_io import pack_scenes
 from riskmap.atomic import write_json, write_npz
 from riskmap.provenance import provenance
 
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
 SHARD_DIR = "shards"
 MANIFEST = "manifest.json"
 INDEX = "index.json"

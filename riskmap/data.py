@@ -5,7 +5,10 @@ A sample (grid G = resolution, C = raster channels):
     motion       float32 [3, G, G]      ego speed, cell x / length, cell y / width
     demo         float32 [2, G, G]      D_demo: path visit counts, goal one-hot
     uncertainty  float32 [G, G]         ado agents' positional uncertainty
-    goal_map     float32 [G, G]         Gaussian around the demonstration's goal cell
+    goal_map     float32 [G, G]         Gaussian around the goal cell
+    goal_cell    int64   [2]            (row, col) of the goal: by default the route rule's
+                                        (`rasterize.highway.RouteRule`, as in closed loop), or
+                                        the demonstration's last in-grid cell (goal="demo")
     start_cell   int64   [2]            the ego's (row, col)
     future       float32 [F, 2]         the ego's future waypoints, ego frame, metres
 """
@@ -21,7 +24,9 @@ import numpy as np
 from rasterize.config import RasterConfig
 from rasterize.errors import InputError
 from rasterize.frames import ego_from_world, ego_pose
-from rasterize.maps import demo_visitation, goal_map, motion_features, uncertainty_map
+from rasterize.maps import (
+    demo_visitation, goal_map, motion_features, route_goal_cell, start_cell, uncertainty_map,
+)
 from rasterize.raster import rasterize_scene
 from rasterize.scene import Scene
 from rasterize.scene_io import check_packed, unpack_scene
@@ -66,7 +71,11 @@ class DemoDataset(_TorchDataset):
     """
 
     def __init__(self, root: str | Path, resolution: int = 50, raster: RasterConfig | None = None,
-                 sigma_x: float = 0.5, sigma_y: float = 1.5, goal_variance: float = 5.0):
+                 sigma_x: float = 0.5, sigma_y: float = 1.5, goal_variance: float = 5.0,
+                 goal: str = "route"):
+        if goal not in ("route", "demo"):
+            raise InputError(f"goal must be 'route' or 'demo', got {goal!r}")
+        self.goal_source = goal
         self.root = Path(root)
         self.manifest = load_manifest(self.root)
         collected = RasterConfig.from_dict(self.manifest["config"]["raster"])
@@ -113,19 +122,18 @@ class DemoDataset(_TorchDataset):
         scene = self.scene(index)
         origin, heading = ego_pose(scene)
         counts, goal = demo_visitation(scene, self.grid)
-        goal_cell = tuple(int(v) for v in np.argwhere(goal)[0])
+        if self.goal_source == "route":
+            goal_cell = route_goal_cell(scene, self.grid)
+        else:
+            goal_cell = tuple(int(v) for v in np.argwhere(goal)[0])
         sample = {
             "raster": rasterize_scene(scene, self.raster_config).astype(np.float32) / 255.0,
             "motion": motion_features(scene, self.grid),
             "demo": np.stack([counts, goal]),
             "uncertainty": uncertainty_map(scene, self.grid, self.sigma_x, self.sigma_y),
             "goal_map": goal_map(goal_cell, self.grid, self.goal_variance),
-            "start_cell": np.array(self._start_cell(), dtype=np.int64),
+            "goal_cell": np.array(goal_cell, dtype=np.int64),
+            "start_cell": np.array(start_cell(self.grid), dtype=np.int64),
             "future": ego_from_world(scene.ego_future_xy(), origin, heading).astype(np.float32),
         }
         return {k: torch.from_numpy(np.ascontiguousarray(v)) for k, v in sample.items()}
-
-    def _start_cell(self) -> tuple[int, int]:
-        from rasterize.maps import start_cell
-
-        return start_cell(self.grid)

@@ -56,6 +56,13 @@ def save_scene_png(scene: Scene, config: RasterConfig, path: Path, title: str = 
         ax.plot(future[:, 1], future[:, 0], "o", color="#3ddc84", ms=3.5)
         handles.append(Line2D([], [], color="#3ddc84", marker="o", ms=3.5,
                               label=f"future {scene.num_future_steps * scene.dt:.0f} s"))
+    if scene.route_xy is not None:
+        origin, heading = ego_pose(scene)
+        route = ego_from_world(scene.route_xy, origin, heading)
+        ax.plot(route[:, 1], route[:, 0], "--", color="#ffd43b", lw=1.2)
+        ax.plot(route[-1, 1], route[-1, 0], "*", color="#ffd43b", ms=11, mec="black", mew=0.5)
+        handles.append(Line2D([], [], color="#ffd43b", ls="--", marker="*", ms=8,
+                              label="route to goal"))
     ax.set_xlim(ext.left_m, -ext.right_m)
     ax.set_ylim(-ext.back_m, ext.front_m)
     ax.set_xlabel("lateral y (m, + left of ego)")

@@ -30,13 +30,21 @@ def test_samples_have_the_documented_shapes(dataset_dir, resolution):
     assert sample["future"].shape == (12, 2) and sample["start_cell"].dtype == torch.int64
     for value in sample.values():
         assert torch.isfinite(value.float()).all()
-    # D_demo starts at the ego's cell and ends at the goal map's peak.
+    # D_demo starts at the ego's cell; the goal map peaks at the goal cell, ahead of the ego.
     r, c = sample["start_cell"].tolist()
     assert sample["demo"][0, r, c] >= 1
-    goal = torch.nonzero(sample["demo"][1])[0].tolist()
-    assert sample["goal_map"][goal[0], goal[1]] == pytest.approx(1.0)
+    gr, gc = sample["goal_cell"].tolist()
+    assert sample["goal_map"][gr, gc] == pytest.approx(1.0) and gr < r
     # Highway ego drives forward: its last waypoint is well ahead.
     assert sample["future"][-1, 0] > 50.0
+
+
+def test_demo_goal_option_uses_the_demonstration_end(dataset_dir):
+    sample = DemoDataset(dataset_dir, goal="demo")[3]
+    goal = torch.nonzero(sample["demo"][1])[0].tolist()
+    assert sample["goal_cell"].tolist() == goal
+    with pytest.raises(InputError, match="goal must be"):
+        DemoDataset(dataset_dir, goal="nowhere")
 
 
 def test_batches_through_a_dataloader(dataset_dir):
