@@ -99,6 +99,14 @@ def _densify(points_ego: np.ndarray, grid: GridConfig) -> list[tuple[int, int]]:
     return path
 
 
+def demo_path_cells(scene: Scene, grid: GridConfig) -> list[tuple[int, int]]:
+    """The ego's recorded future as a 4-connected cell path from its own cell (see `_densify`)."""
+    origin, heading = ego_pose(scene)
+    future = scene.ego_future_xy()
+    points = np.concatenate([[[0.0, 0.0]], ego_from_world(future, origin, heading)], axis=0)
+    return _densify(points, grid)
+
+
 def demo_visitation(scene: Scene, grid: GridConfig) -> tuple[np.ndarray, np.ndarray]:
     """D_demo of the ego's recorded future: (visit counts [rows, cols], goal one-hot [rows, cols]).
 
@@ -106,10 +114,7 @@ def demo_visitation(scene: Scene, grid: GridConfig) -> tuple[np.ndarray, np.ndar
     cell path, and ends at the last cell inside the grid, where the goal one-hot sits (the
     planner's `end` action).
     """
-    origin, heading = ego_pose(scene)
-    future = scene.ego_future_xy()
-    points = np.concatenate([[[0.0, 0.0]], ego_from_world(future, origin, heading)], axis=0)
-    path = _densify(points, grid)
+    path = demo_path_cells(scene, grid)
     counts = np.zeros((grid.rows, grid.cols), dtype=np.float32)
     goal = np.zeros_like(counts)
     for r, c in path:

@@ -10,6 +10,7 @@ A sample (grid G = resolution, C = raster channels):
                                         (`rasterize.highway.RouteRule`, as in closed loop), or
                                         the demonstration's last in-grid cell (goal="demo")
     start_cell   int64   [2]            the ego's (row, col)
+    demo_path    int64   [3G, 2]        the demonstration's cell path, padded with -1
     future       float32 [F, 2]         the ego's future waypoints, ego frame, metres
 """
 
@@ -25,7 +26,7 @@ from rasterize.config import RasterConfig
 from rasterize.errors import InputError
 from rasterize.frames import ego_from_world, ego_pose
 from rasterize.maps import (
-    demo_visitation, goal_map, motion_features, route_goal_cell, start_cell, uncertainty_map,
+    demo_path_cells, demo_visitation, goal_map, motion_features, route_goal_cell, start_cell, uncertainty_map,
 )
 from rasterize.raster import rasterize_scene
 from rasterize.scene import Scene
@@ -122,6 +123,9 @@ class DemoDataset(_TorchDataset):
         scene = self.scene(index)
         origin, heading = ego_pose(scene)
         counts, goal = demo_visitation(scene, self.grid)
+        path = np.full((3 * self.grid.rows, 2), -1, dtype=np.int64)
+        cells = demo_path_cells(scene, self.grid)[: len(path)]
+        path[: len(cells)] = cells
         if self.goal_source == "route":
             goal_cell = route_goal_cell(scene, self.grid)
         else:
@@ -134,6 +138,7 @@ class DemoDataset(_TorchDataset):
             "goal_map": goal_map(goal_cell, self.grid, self.goal_variance),
             "goal_cell": np.array(goal_cell, dtype=np.int64),
             "start_cell": np.array(start_cell(self.grid), dtype=np.int64),
+            "demo_path": path,
             "future": ego_from_world(scene.ego_future_xy(), origin, heading).astype(np.float32),
         }
         return {k: torch.from_numpy(np.ascontiguousarray(v)) for k, v in sample.items()}
