@@ -186,6 +186,13 @@ class TrafficRecorder:
             self._kinds.append(int(_kind_of(obj)))
         return self._ids[key]
 
+    def adopt(self, new, old) -> None:
+        """`new` continues the recording of agent `old` (e.g. the ego handed to another driver)."""
+        self._ids[id(new)] = self._agent_id(old)
+        self._alive.append(new)
+        if self.ego is old:
+            self.ego = new
+
     @property
     def ego_id(self) -> int:
         return self._agent_id(self.ego)

@@ -39,6 +39,37 @@ def _cmd_figures_scenes(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_train(args: argparse.Namespace) -> int:
+    from riskmap.train import TrainConfig, train
+
+    config = TrainConfig(
+        data=args.data, out=args.out, resolution=args.resolution,
+        uncertainty_weight=args.uncertainty_weight, sigma_x=args.sigma_x, sigma_y=args.sigma_y,
+        goal_variance=args.goal_variance, goal=args.goal, epochs=args.epochs,
+        batch_size=args.batch_size, lr=args.lr, horizon=args.horizon, seed=args.seed,
+        device=args.device, backbone_weights=args.backbone_weights, max_windows=args.max_windows,
+    )
+    best = train(config, resume=args.resume, progress=not args.quiet)
+    print(f"best epoch {best.get('epoch')}: val ADE {best['val_ade_m']:.2f} m; "
+          f"checkpoint {Path(args.out) / 'best.safetensors'}")
+    return 0
+
+
+def _cmd_drive(args: argparse.Namespace) -> int:
+    from riskmap.drive import DriveConfig, drive
+
+    if bool(args.checkpoint) == bool(args.planner):
+        raise InputError("pass exactly one of --checkpoint CKPT or --planner SPEC")
+    spec = args.planner or f"riskmap:{args.checkpoint}"
+    config = DriveConfig(env_id=args.env, episodes=args.episodes, seed=args.seed)
+    summary = drive(config, spec, Path(args.out), resume=args.resume, frames=args.frames,
+                    progress=not args.quiet)["summary"]
+    print(f"{spec} on {args.env}: {summary['episodes']} episodes, collision rate "
+          f"{summary['collision_rate']:.2f}, distance {summary['distance_m']:.0f} m, "
+          f"min gap {summary['min_gap_m']:.1f} m -> {Path(args.out) / 'summary.json'}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="riskmap", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -53,6 +84,43 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--resume", action="store_true", help="continue an interrupted collection")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=_cmd_collect)
+
+    p = sub.add_parser("train", help="train the risk-map planner (MaxEnt IRL)")
+    p.add_argument("--data", required=True, help="dataset directory (from riskmap collect)")
+    p.add_argument("--out", required=True, help="run directory")
+    p.add_argument("--resolution", type=_positive_int, default=50, help="risk-map cells a side")
+    p.add_argument("--uncertainty-weight", type=float, default=1.0, help="v of eq. 5")
+    p.add_argument("--sigma-x", type=float, default=0.5, help="uncertainty across agents (m)")
+    p.add_argument("--sigma-y", type=float, default=1.5, help="uncertainty along agents (m)")
+    p.add_argument("--goal-variance", type=float, default=5.0, help="goal Gaussian (cells^2)")
+    p.add_argument("--goal", choices=("route", "demo"), default="route",
+                   help="goal of each window: the route rule (as in closed loop) or the demo's end")
+    p.add_argument("--epochs", type=_positive_int, default=10)
+    p.add_argument("--batch-size", type=_positive_int, default=32)
+    p.add_argument("--lr", type=float, default=1e-4)
+    p.add_argument("--horizon", type=_positive_int, default=None,
+                   help="value-iteration steps (default 1.6 x resolution)")
+    p.add_argument("--device", default="auto", help="auto, cpu or cuda[:N]")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--backbone-weights", default=None,
+                   help="local torchvision ResNet-34 state dict to initialise the stem")
+    p.add_argument("--max-windows", type=_positive_int, default=None,
+                   help="use at most this many training windows (quick runs)")
+    p.add_argument("--resume", action="store_true", help="continue an interrupted run exactly")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=_cmd_train)
+
+    p = sub.add_parser("drive", help="drive closed-loop episodes with a planner")
+    p.add_argument("--checkpoint", help="risk-map planner checkpoint (same as --planner riskmap:CKPT)")
+    p.add_argument("--planner", help="planner SPEC: idm or riskmap:PATH")
+    p.add_argument("--env", required=True)
+    p.add_argument("--episodes", type=_positive_int, required=True)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", required=True)
+    p.add_argument("--frames", action="store_true", help="write a PNG per replan")
+    p.add_argument("--resume", action="store_true")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=_cmd_drive)
 
     p = sub.add_parser("figures", help="export PNG figures")
     fig_sub = p.add_subparsers(dest="figure", required=True)

@@ -13,7 +13,7 @@ import json
 import multiprocessing as mp
 import shutil
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -22,44 +22,13 @@ from rasterize.config import FAMILY_EXTENTS, RasterConfig, family_of_env
 from rasterize.errors import InputError
 from rasterize.scene_io import pack_scenes
 from riskmap.atomic import write_json, write_npz
+from riskmap.episode import FAMILY_SETUPS, Episode, FamilySetup, make_env
 from riskmap.provenance import provenance
 
 FORMAT_VERSION = 2
 SHARD_DIR = "shards"
 MANIFEST = "manifest.json"
 INDEX = "index.json"
-
-
-@dataclass(frozen=True)
-class DriverRanges:
-    """Per-episode IDM/MOBIL parameters of the ego, drawn uniformly from these ranges."""
-
-    desired_speed_mps: tuple[float, float]
-    time_gap_s: tuple[float, float] = (1.0, 2.0)
-    politeness: tuple[float, float] = (0.0, 0.5)
-
-
-@dataclass(frozen=True)
-class FamilySetup:
-    """How one scenario family is simulated."""
-
-    episode_s: float                   # simulated seconds per episode
-    drivers: DriverRanges
-    env_config: dict = field(default_factory=dict)
-    keep_radius_m: float = 250.0       # vehicles farther from the ego are removed
-    ego_destinations: tuple[str, ...] = ()   # exits the ego may be routed to (random per episode)
-    spawn_every_s: float = 0.0         # >0: call the env's own traffic spawner this often
-
-
-FAMILY_SETUPS: dict[str, FamilySetup] = {
-    "highway": FamilySetup(40.0, DriverRanges((20.0, 32.0)), {"vehicles_count": 40}),
-    "merge": FamilySetup(25.0, DriverRanges((20.0, 30.0))),
-    "roundabout": FamilySetup(20.0, DriverRanges((8.0, 16.0)), {"duration": 20},
-                              ego_destinations=("exr", "sxr", "nxr")),
-    "intersection": FamilySetup(16.0, DriverRanges((6.0, 10.0)), {"duration": 16},
-                                keep_radius_m=150.0, ego_destinations=("o1", "o2", "o3"),
-                                spawn_every_s=1.0),
-}
 
 
 @dataclass(frozen=True)
@@ -105,109 +74,25 @@ class CollectConfig:
         return data
 
 
-def episode_seed(seed: int, episode: int) -> int:
-    """Independent, reproducible seed of one episode."""
-    return int(np.random.SeedSequence([seed, episode]).generate_state(1)[0])
-
-
-def _make_env(config: CollectConfig):
-    import warnings
-
-    import gymnasium as gym
-    import highway_env  # noqa: F401  (registers the envs)
-
-    # The -v0 ids are the ones this toolkit is built and benchmarked on; silence gymnasium's
-    # notice that newer versions exist.
-    warnings.filterwarnings("ignore", message=".*is out of date.*", category=DeprecationWarning)
-
-    env_config = {"simulation_frequency": config.record_hz, "policy_frequency": 1,
-                  "duration": config.setup.episode_s}
-    env_config.update(config.setup.env_config)
-    return gym.make(config.env_id, config=env_config)
-
-
-def _install_human_ego(base, rng: np.random.Generator, setup: FamilySetup) -> dict:
-    """Replace the env's controlled vehicle by an IDM/MOBIL driver with sampled parameters."""
-    from highway_env.vehicle.behavior import IDMVehicle
-
-    old = base.vehicle
-    ego = IDMVehicle.create_from(old)
-    drivers = setup.drivers
-    params = {
-        "desired_speed_mps": float(rng.uniform(*drivers.desired_speed_mps)),
-        "time_gap_s": float(rng.uniform(*drivers.time_gap_s)),
-        "politeness": float(rng.uniform(*drivers.politeness)),
-    }
-    ego.target_speed = params["desired_speed_mps"]
-    ego.TIME_WANTED = params["time_gap_s"]  # instance attributes shadow the class defaults
-    ego.POLITENESS = params["politeness"]
-    if setup.ego_destinations:
-        destination = str(rng.choice(setup.ego_destinations))
-        ego.plan_route_to(destination)
-        params["destination"] = destination
-    base.road.vehicles[base.road.vehicles.index(old)] = ego
-    base.controlled_vehicles[0] = ego
-    return params
-
-
-def _off_network(road, vehicle, margin_m: float = 1.0) -> bool:
-    """True once the vehicle is off every lane (past the end of the road, or off it sideways).
-
-    highway-env's own `on_road` checks only the vehicle's assigned lane, which flickers at
-    junctions of the roundabout; the nearest lane of the whole network does not.
-    """
-    lane = road.network.get_lane(road.network.get_closest_lane_index(vehicle.position,
-                                                                     vehicle.heading))
-    return not lane.on_lane(vehicle.position, margin=margin_m)
-
-
 def run_episode(env, config: CollectConfig, episode: int):
-    """Simulate one episode; returns (windows as Scenes, episode info dict)."""
-    from rasterize.highway import TrafficRecorder
-
-    base = env.unwrapped
-    seed = episode_seed(config.seed, episode)
-    env.reset(seed=seed)
-    rng = np.random.default_rng([config.seed, episode, 1])
-    setup = config.setup
-    params = _install_human_ego(base, rng, setup)
-    ego = base.vehicle
-    dt = 1.0 / config.record_hz
-    recorder = TrafficRecorder(base.road, ego, dt)
-    recorder.record()
-    n_steps = int(round(setup.episode_s * config.record_hz))
-    per_second = config.record_hz
-    crashed = off_network = False
-    for step in range(1, n_steps + 1):
-        base.road.act()
-        base.road.step(dt)
-        recorder.record()
-        if ego.crashed:
-            crashed = True
-            break
-        if step % per_second == 0:
-            if _off_network(base.road, ego):
-                off_network = True
-                break
-            base.road.vehicles = [v for v in base.road.vehicles if v is ego or
-                                  np.linalg.norm(v.position - ego.position) <= setup.keep_radius_m]
-            if setup.spawn_every_s and step % int(round(setup.spawn_every_s * per_second)) == 0:
-                base._clear_vehicles()
-                base._spawn_vehicle(spawn_probability=base.config["spawn_probability"])
-
+    """Simulate one episode with the IDM/MOBIL ego; returns (windows as Scenes, episode info)."""
+    run = Episode(env, config.env_id, config.seed, episode, config.record_hz)
+    while not run.done and run.time_s < config.setup.episode_s - 1e-9:
+        run.step()
+    recorder = run.recorder
     stride = int(round(config.window_stride_s * config.record_hz))
     first = int(round(config.history_s * config.record_hz))
     last = recorder.num_steps - 1 - int(round(config.future_s * config.record_hz))
-    if crashed:  # a driver heading into a crash is no demonstration to learn from
+    if run.crashed:  # a driver heading into a crash is no demonstration to learn from
         last -= int(round(config.crash_margin_s * config.record_hz))
     windows = [
         recorder.scene(step, config.history_s, config.future_s, config.window_dt_s,
                        config.scene_radius_m, config.max_agents, source=config.env_id)
         for step in range(first, last + 1, stride)
     ]
-    info = {"episode": episode, "seed": seed, "driver": params, "windows": len(windows),
-            "simulated_s": (recorder.num_steps - 1) * dt, "ego_crashed": crashed,
-            "ego_off_network": off_network}
+    info = {"episode": episode, "seed": run.seed, "driver": run.driver, "windows": len(windows),
+            "simulated_s": run.time_s, "ego_crashed": run.crashed,
+            "ego_off_network": run.off_network}
     return windows, info
 
 
@@ -240,7 +125,7 @@ def _worker_init(config: CollectConfig, out: str) -> None:
 
     cv2.setNumThreads(1)
     _WORKER["config"], _WORKER["out"] = config, Path(out)
-    _WORKER["env"] = _make_env(config)
+    _WORKER["env"] = make_env(config.env_id, config.record_hz)
 
 
 def _worker_episode(episode: int) -> dict:

@@ -113,6 +113,10 @@ class DemoDataset(_TorchDataset):
     def __len__(self) -> int:
         return len(self._items)
 
+    def episode_of(self, index: int) -> int:
+        """The episode (shard) a window comes from."""
+        return self._items[index][0]
+
     def scene(self, index: int) -> Scene:
         shard, local = self._items[index]
         return unpack_scene(self._shards[shard], local, source=self.source)

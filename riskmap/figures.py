@@ -34,7 +34,13 @@ def raster_to_rgb(raster: np.ndarray) -> np.ndarray:
     return rgb
 
 
-def save_scene_png(scene: Scene, config: RasterConfig, path: Path, title: str = "") -> Path:
+def save_plan_png(scene: Scene, plan, config: RasterConfig, path: Path, title: str = "") -> Path:
+    """A closed-loop frame: the scene with the plan's 12 waypoints on top."""
+    return save_scene_png(scene, config, path, title, plan_waypoints=plan.waypoints)
+
+
+def save_scene_png(scene: Scene, config: RasterConfig, path: Path, title: str = "",
+                   plan_waypoints: np.ndarray | None = None) -> Path:
     """Write the scene's raster with the ego's recorded future (if any) overlaid, labelled."""
     import matplotlib
 
@@ -63,6 +69,10 @@ def save_scene_png(scene: Scene, config: RasterConfig, path: Path, title: str = 
         ax.plot(route[-1, 1], route[-1, 0], "*", color="#ffd43b", ms=11, mec="black", mew=0.5)
         handles.append(Line2D([], [], color="#ffd43b", ls="--", marker="*", ms=8,
                               label="route to goal"))
+    if plan_waypoints is not None:
+        path_xy = np.concatenate([[[0.0, 0.0]], plan_waypoints])
+        ax.plot(path_xy[:, 1], path_xy[:, 0], "-o", color="#ff66ff", lw=1.4, ms=3)
+        handles.append(Line2D([], [], color="#ff66ff", marker="o", ms=3, label="plan 6 s"))
     ax.set_xlim(ext.left_m, -ext.right_m)
     ax.set_ylim(-ext.back_m, ext.front_m)
     ax.set_xlabel("lateral y (m, + left of ego)")

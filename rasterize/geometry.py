@@ -1,0 +1,38 @@
+"""Oriented-box geometry: overlap and clearance between vehicles' boxes (corners [4, 2])."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def _axes(corners: np.ndarray) -> np.ndarray:
+    edges = np.roll(corners, -1, axis=0) - corners
+    normals = np.stack([-edges[:, 1], edges[:, 0]], axis=1)
+    return normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-12)
+
+
+def boxes_overlap(a: np.ndarray, b: np.ndarray) -> bool:
+    """Separating-axis test for two convex quadrilaterals."""
+    for axis in np.concatenate([_axes(a), _axes(b)]):
+        pa, pb = a @ axis, b @ axis
+        if pa.max() < pb.min() or pb.max() < pa.min():
+            return False
+    return True
+
+
+def _point_segment_distance(p: np.ndarray, s0: np.ndarray, s1: np.ndarray) -> np.ndarray:
+    """Distances [P, S] from points [P, 2] to segments (s0, s1) [S, 2]."""
+    d = s1 - s0
+    t = ((p[:, None, :] - s0[None]) * d[None]).sum(-1) / np.maximum((d * d).sum(-1), 1e-12)
+    closest = s0[None] + np.clip(t, 0.0, 1.0)[..., None] * d[None]
+    return np.linalg.norm(p[:, None, :] - closest, axis=-1)
+
+
+def box_gap(a: np.ndarray, b: np.ndarray) -> float:
+    """Clearance (m) between two boxes: 0 when they touch or overlap."""
+    if boxes_overlap(a, b):
+        return 0.0
+    ea0, ea1 = a, np.roll(a, -1, axis=0)
+    eb0, eb1 = b, np.roll(b, -1, axis=0)
+    return float(min(_point_segment_distance(a, eb0, eb1).min(),
+                     _point_segment_distance(b, ea0, ea1).min()))

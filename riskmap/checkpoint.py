@@ -1,0 +1,57 @@
+"""Checkpoints: safetensors weights plus a JSON sidecar with every config and the metrics."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import torch
+from safetensors.torch import load_file, save
+
+from rasterize.config import RasterConfig
+from rasterize.errors import InputError
+from riskmap.atomic import atomic_write, write_json
+from riskmap.model import ModelConfig, RiskMapGenerator
+from riskmap.provenance import provenance
+
+CHECKPOINT_KIND = "riskmap"
+
+
+def save_checkpoint(path: Path, model: torch.nn.Module, sidecar: dict) -> Path:
+    """Write `path` (.safetensors) and `path.with_suffix('.json')`, each atomically."""
+    path = Path(path).with_suffix(".safetensors")
+    state = {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}
+    atomic_write(path, lambda f: f.write(save(state)))
+    write_json(path.with_suffix(".json"), {"kind": CHECKPOINT_KIND, **provenance(), **sidecar})
+    return path
+
+
+def read_sidecar(path: Path) -> dict:
+    path = Path(path)
+    weights = path.with_suffix(".safetensors")
+    sidecar = path.with_suffix(".json")
+    if not weights.exists() or not sidecar.exists():
+        raise InputError(f"checkpoint {path} not found (need {weights.name} and {sidecar.name}); "
+                         "train one with `riskmap train` or pass a path under checkpoints/")
+    try:
+        data = json.loads(sidecar.read_text())
+    except ValueError:
+        raise InputError(f"{sidecar} is not valid JSON; the checkpoint is damaged") from None
+    if data.get("kind") != CHECKPOINT_KIND:
+        raise InputError(f"{sidecar} is not a risk-map planner checkpoint (kind={data.get('kind')})")
+    return data
+
+
+def load_model(path: Path, device: str = "cpu") -> tuple[RiskMapGenerator, dict]:
+    """The trained generator (eval mode) and its sidecar."""
+    data = read_sidecar(path)
+    model = RiskMapGenerator(ModelConfig(**data["model"]))
+    try:
+        model.load_state_dict(load_file(str(Path(path).with_suffix(".safetensors"))))
+    except (RuntimeError, OSError) as err:
+        raise InputError(f"checkpoint {path} does not match its model config ({err}); "
+                         "it was made by an incompatible version") from None
+    model.to(device).eval()
+    RasterConfig.from_dict(data["raster"])  # validates
+    return model, data
+

@@ -1,0 +1,115 @@
+"""Tracking a plan: pure pursuit for steering, a PI loop for speed, at the control rate.
+
+Waypoints arrive in the ego frame of the moment they were planned; the controller pins them to
+the world then, so that between replans it keeps tracking the same path while the ego moves.
+Angles are in the toolkit's world frame (counter-clockwise); `PlannedVehicle` converts to
+highway-env's clockwise steering.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rasterize.frames import world_from_ego
+
+# Waypoint times of a plan (s after it was made): 0.5, 1.0, ... 6.0
+PLAN_TIMES_S = 0.5 * np.arange(1, 13)
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    lookahead_min_m: float = 5.0
+    lookahead_time_s: float = 0.9       # lookahead distance = max(min, speed × time)
+    wheelbase_m: float = 5.0            # highway-env's bicycle: yaw rate ≈ v·δ / vehicle length
+    kp_per_s: float = 1.2               # acceleration per m/s of speed error
+    ki_per_s2: float = 0.15
+    accel_min_mps2: float = -6.0
+    accel_max_mps2: float = 3.0
+    max_steer_rad: float = 0.6
+
+
+class TrackingController:
+    def __init__(self, config: ControllerConfig = ControllerConfig()):
+        self.config = config
+        self.path = None          # [13, 2] world: plan origin then the waypoints
+        self._integral = 0.0
+
+    def set_plan(self, waypoints_ego: np.ndarray, origin: np.ndarray, heading: float) -> None:
+        pts = np.concatenate([[[0.0, 0.0]], np.asarray(waypoints_ego, dtype=np.float64)])
+        self.path = world_from_ego(pts, origin, heading)
+        seg = np.linalg.norm(np.diff(self.path, axis=0), axis=1)
+        self._s = np.concatenate([[0.0], np.cumsum(seg)])
+        # Speed the plan implies over each 0.5 s interval.
+        self._speeds = seg / 0.5
+
+    def target_speed(self, since_plan_s: float) -> float:
+        k = int(np.clip(since_plan_s // 0.5, 0, len(self._speeds) - 1))
+        return float(self._speeds[k])
+
+    def _lookahead_point(self, position: np.ndarray, distance: float) -> np.ndarray:
+        path, s = self.path, self._s
+        seg = np.diff(path, axis=0)
+        lengths = np.maximum((seg * seg).sum(1), 1e-12)
+        t = np.clip(((position - path[:-1]) * seg).sum(1) / lengths, 0, 1)
+        closest = path[:-1] + t[:, None] * seg
+        i = int(np.argmin(np.linalg.norm(closest - position, axis=1)))
+        target_s = s[i] + t[i] * np.sqrt(lengths[i]) + distance
+        if target_s >= s[-1]:  # beyond the plan: continue straight along its last segment
+            direction = seg[-1] / np.sqrt(lengths[-1]) if s[-1] > 1e-6 else np.zeros(2)
+            return path[-1] + (target_s - s[-1]) * direction
+        return np.array([np.interp(target_s, s, path[:, 0]), np.interp(target_s, s, path[:, 1])])
+
+    def action(self, position: np.ndarray, heading: float, speed: float, since_plan_s: float,
+               dt: float) -> tuple[float, float]:
+        """(acceleration m/s², steering rad counter-clockwise) for the next control step."""
+        cfg = self.config
+        if self.path is None:
+            return cfg.accel_min_mps2, 0.0
+        v_target = self.target_speed(since_plan_s)
+        error = v_target - speed
+        self._integral = float(np.clip(self._integral + error * dt, -5.0, 5.0))
+        accel = cfg.kp_per_s * error + cfg.ki_per_s2 * self._integral
+        accel = float(np.clip(accel, cfg.accel_min_mps2, cfg.accel_max_mps2))
+        accel = max(accel, -speed / dt)       # brake to a stop, never into reverse
+        if self._s[-1] < 0.5:                 # a plan to stay put
+            return accel, 0.0
+        lookahead = max(cfg.lookahead_min_m, speed * cfg.lookahead_time_s)
+        target = self._lookahead_point(position, lookahead)
+        d = target - position
+        alpha = np.arctan2(d[1], d[0]) - heading
+        alpha = (alpha + np.pi) % (2 * np.pi) - np.pi
+        curvature = 2.0 * np.sin(alpha) / max(np.linalg.norm(d), 1e-6)
+        # Invert highway-env's bicycle: yaw rate = v sin(beta) / (L/2), tan(delta) = 2 tan(beta).
+        sin_beta = np.clip(curvature * cfg.wheelbase_m / 2.0, -0.99, 0.99)
+        steer = float(np.arctan(2.0 * np.tan(np.arcsin(sin_beta))))
+        return accel, float(np.clip(steer, -cfg.max_steer_rad, cfg.max_steer_rad))
+
+
+def planned_vehicle_class():
+    """A highway-env vehicle that keeps its route bookkeeping but drives by the action it is given."""
+    from highway_env.vehicle.controller import ControlledVehicle
+
+    class PlannedVehicle(ControlledVehicle):
+        def act(self, action=None):
+            self.follow_road()            # keeps lane and route up to date, as the IDM ego does
+            if action is not None:
+                self.action = dict(action)
+
+        def command(self, accel: float, steer_ccw: float) -> None:
+            self.action = {"acceleration": accel, "steering": -steer_ccw}   # highway-env: clockwise
+
+    return PlannedVehicle
+
+
+def hand_over_to_planner(episode) -> object:
+    """Replace the episode's ego by a PlannedVehicle with the same state and route."""
+    cls = planned_vehicle_class()
+    old = episode.ego
+    new = cls(old.road, old.position.copy(), old.heading, old.speed,
+              target_lane_index=old.target_lane_index, target_speed=old.target_speed,
+              route=list(old.route) if old.route else None)
+    new.action = {"acceleration": 0.0, "steering": 0.0}
+    episode.replace_ego(new)
+    return new

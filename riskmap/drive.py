@@ -1,0 +1,163 @@
+"""`riskmap drive`: closed-loop episodes in highway-env with any planner driving the ego.
+
+The traffic of episode e under seed S is exactly the traffic the demonstrations met (same env
+seed, same human driver parameters); for a planner the ego is handed over at t = 0 to a vehicle
+that a tracking controller drives at `control_hz`, replanning at `replan_hz` from the recorded
+2 s history. Per episode: OUT/episodes/episode_NNNNNN.json (atomic); OUT/summary.json at the end.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from rasterize.config import family_of_env
+from rasterize.errors import InputError
+from rasterize.frames import box_corners, ego_pose
+from rasterize.geometry import box_gap
+from riskmap.atomic import write_json
+from riskmap.control import ControllerConfig, TrackingController, hand_over_to_planner
+from riskmap.episode import FAMILY_SETUPS, Episode, make_env
+from riskmap.planner import check_plan
+from riskmap.provenance import provenance
+from riskmap.registry import HumanDriver, make_planner
+
+
+@dataclass(frozen=True)
+class DriveConfig:
+    env_id: str
+    episodes: int
+    seed: int = 0
+    control_hz: int = 10
+    replan_hz: int = 2
+    episode_s: float | None = None     # default: the family's episode length
+    gap_radius_m: float = 40.0         # others farther than this do not count for the min gap
+    history_s: float = 2.0
+
+    def __post_init__(self) -> None:
+        family = family_of_env(self.env_id)
+        if self.episode_s is None:
+            object.__setattr__(self, "episode_s", FAMILY_SETUPS[family].episode_s)
+        if self.control_hz % self.replan_hz:
+            raise InputError("control_hz must be a multiple of replan_hz")
+
+
+def _min_gap(road, ego, radius: float) -> float:
+    me = box_corners(ego.position, [np.cos(ego.heading), np.sin(ego.heading)], ego.LENGTH,
+                     ego.WIDTH)
+    gaps = [box_gap(me, box_corners(v.position, [np.cos(v.heading), np.sin(v.heading)], v.LENGTH,
+                                    v.WIDTH))
+            for v in road.vehicles
+            if v is not ego and np.linalg.norm(v.position - ego.position) < radius]
+    return min(gaps, default=float("inf"))
+
+
+def drive_episode(env, planner, config: DriveConfig, episode: int, frames_dir: Path | None = None
+                  ) -> dict:
+    run = Episode(env, config.env_id, config.seed, episode, config.control_hz)
+    human = isinstance(planner, HumanDriver)
+    controller = TrackingController(ControllerConfig())
+    plan_times, gaps, speeds = [], [], []
+    since_plan = 0.0
+    replan_every = config.control_hz // config.replan_hz
+    if not human:
+        vehicle = hand_over_to_planner(run)
+        planner.reset(run.recorder.scene(0, config.history_s, 0.0))
+    distance = 0.0
+    n_steps = int(round(config.episode_s * config.control_hz))
+    for k in range(n_steps):
+        ego = run.ego
+        if not human:
+            if k % replan_every == 0:
+                scene = run.recorder.scene(run.recorder.num_steps - 1, config.history_s, 0.0,
+                                           source=config.env_id)
+                started = time.perf_counter()
+                plan = check_plan(planner.plan(scene), type(planner).__name__)
+                plan_times.append(time.perf_counter() - started)
+                origin, heading = ego_pose(scene)
+                controller.set_plan(plan.waypoints, origin, heading)
+                since_plan = 0.0
+                if frames_dir is not None:
+                    from riskmap.figures import save_plan_png
+
+                    save_plan_png(scene, plan, planner.raster,
+                                  frames_dir / f"episode_{episode:06d}_t{k:04d}.png",
+                                  f"{config.env_id} episode {episode} t = {run.time_s:.1f} s")
+            state = run.recorder.arrays()[0][run.recorder.ego_id, -1]
+            accel, steer = controller.action(state[:2], float(np.arctan2(state[3], state[2])),
+                                             float(state[4]), since_plan, run.dt)
+            vehicle.command(accel, steer)
+            since_plan += run.dt
+        before = ego.position.copy()
+        run.step()
+        distance += float(np.linalg.norm(run.ego.position - before))
+        speeds.append(float(run.ego.speed))
+        gaps.append(_min_gap(run.base.road, run.ego, config.gap_radius_m))
+        if run.done:
+            break
+    return {
+        "episode": episode, "env_seed": run.seed, "driver": run.driver,
+        "planner": "idm" if human else type(planner).__name__,
+        "collided": run.crashed, "off_road": run.off_network,
+        "simulated_s": round(run.time_s, 3), "distance_m": distance,
+        "mean_speed_mps": float(np.mean(speeds)) if speeds else 0.0,
+        "min_gap_m": float(min(gaps)) if gaps else float("inf"),
+        "plan_ms_median": 1000 * float(np.median(plan_times)) if plan_times else None,
+        "plan_ms_mean": 1000 * float(np.mean(plan_times)) if plan_times else None,
+        "plan_calls": len(plan_times),
+    }
+
+
+def summarise(records: list[dict]) -> dict:
+    def mean(key):
+        values = [r[key] for r in records if r[key] is not None and np.isfinite(r[key])]
+        return float(np.mean(values)) if values else None
+
+    return {
+        "episodes": len(records),
+        "collision_rate": mean("collided"),
+        "off_road_rate": mean("off_road"),
+        "distance_m": mean("distance_m"),
+        "mean_speed_mps": mean("mean_speed_mps"),
+        "min_gap_m": mean("min_gap_m"),
+        "plan_ms_median": float(np.median([r["plan_ms_median"] for r in records
+                                           if r["plan_ms_median"] is not None]))
+        if any(r["plan_ms_median"] is not None for r in records) else None,
+    }
+
+
+def drive(config: DriveConfig, planner_spec: str, out: Path, resume: bool = False,
+          frames: bool = False, progress: bool = True) -> dict:
+    from tqdm import tqdm
+
+    out = Path(out)
+    planner = make_planner(planner_spec, seed=config.seed)
+    episodes_dir = out / "episodes"
+    if episodes_dir.exists() and any(episodes_dir.iterdir()) and not resume:
+        raise InputError(f"--out {out} already holds driven episodes; pass --resume to continue "
+                         "or choose another --out")
+    meta = {"config": asdict(config), "planner": planner_spec, **provenance()}
+    if resume and (out / "run.json").exists():
+        previous = json.loads((out / "run.json").read_text())
+        if previous["config"] | {"episodes": config.episodes} != meta["config"] or \
+                previous["planner"] != planner_spec:
+            raise InputError(f"--out {out} was driven with other settings; choose another --out")
+    write_json(out / "run.json", meta)
+    env = make_env(config.env_id, config.control_hz)
+    records = []
+    for episode in tqdm(range(config.episodes), disable=not progress, desc=f"drive {planner_spec}"):
+        path = episodes_dir / f"episode_{episode:06d}.json"
+        if resume and path.exists():
+            records.append(json.loads(path.read_text()))
+            continue
+        record = drive_episode(env, planner, config, episode,
+                               out / "frames" if frames else None)
+        write_json(path, record)
+        records.append(record)
+    summary = {**meta, "summary": summarise(records)}
+    write_json(out / "summary.json", summary)
+    return summary

@@ -1,0 +1,117 @@
+"""The `Planner` protocol, the `Plan` it returns, and the risk-map planner.
+
+Every planner that can drive the ego implements `reset(scene)` and `plan(scene) -> Plan`; the
+closed-loop harness replans at 2 Hz and tracks the waypoints with a controller.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+import torch
+
+from rasterize.config import GridConfig, RasterConfig
+from rasterize.errors import InputError
+from rasterize.maps import goal_map, motion_features, route_goal_cell, start_cell
+from rasterize.raster import rasterize_scene
+from rasterize.scene import Scene
+from riskmap.irl import goal_log_map
+from riskmap.sampler import SamplerConfig, sample_trajectory
+from riskmap.vi import soft_value_iteration, state_visitation
+
+PLAN_STEPS = 12      # waypoints
+PLAN_DT_S = 0.5      # seconds between waypoints (6 s at 2 Hz)
+
+
+@dataclass
+class Plan:
+    """waypoints [12, 2]: ego frame (x forward, y left), metres, at 0.5 s steps over 6 s.
+
+    The intermediate products are there for figures; planners without them leave them None.
+    risk_map, goal_map, svf [G, G]; policy [5, G, G]; timings_s: seconds per stage.
+    """
+
+    waypoints: np.ndarray
+    risk_map: np.ndarray | None = None
+    goal_map: np.ndarray | None = None
+    policy: np.ndarray | None = None
+    svf: np.ndarray | None = None
+    goal_cell: tuple[int, int] | None = None
+    timings_s: dict = field(default_factory=dict)
+
+
+@runtime_checkable
+class Planner(Protocol):
+    def reset(self, scene: Scene) -> None: ...
+
+    def plan(self, scene: Scene) -> Plan: ...
+
+
+class RiskMapPlanner:
+    """BEV raster → risk map → soft value iteration → SVF → sampled 12-waypoint trajectory.
+
+    The goal is the route rule's (`rasterize.highway.RouteRule`): the last point of the ego's
+    route ahead inside the grid, the same rule that built the training goal maps.
+    """
+
+    def __init__(self, model: torch.nn.Module, raster: RasterConfig, grid: GridConfig,
+                 horizon: int, goal_variance: float, gamma: float = 1.0,
+                 sampler: SamplerConfig = SamplerConfig(), seed: int = 0):
+        self.model, self.raster, self.grid = model.eval(), raster, grid
+        self.horizon, self.goal_variance, self.gamma = horizon, goal_variance, gamma
+        self.sampler, self.seed = sampler, seed
+        self._calls = 0
+
+    @classmethod
+    def load(cls, checkpoint: str | Path, seed: int = 0) -> RiskMapPlanner:
+        from riskmap.checkpoint import load_model
+
+        model, side = load_model(Path(checkpoint))
+        return cls(model, RasterConfig.from_dict(side["raster"]), GridConfig.from_dict(side["grid"]),
+                   side["irl"]["horizon"], side["irl"]["goal_variance"], side["irl"]["gamma"],
+                   SamplerConfig(**side["sampler"]), seed)
+
+    def reset(self, scene: Scene) -> None:
+        self._calls = 0
+
+    def plan(self, scene: Scene) -> Plan:
+        scene = scene.past()
+        t = {}
+        t0 = time.perf_counter()
+        raster = rasterize_scene(scene, self.raster)
+        motion = motion_features(scene, self.grid)
+        goal_cell = route_goal_cell(scene, self.grid)
+        start = start_cell(self.grid)
+        t["raster"] = time.perf_counter() - t0
+        with torch.no_grad():
+            t0 = time.perf_counter()
+            risk = self.model(torch.from_numpy(raster).float().div_(255.0)[None],
+                              torch.from_numpy(motion)[None])
+            t["network"] = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            g = goal_log_map(torch.tensor([goal_cell]), self.grid.rows, self.grid.cols,
+                             self.goal_variance)
+            _, policy = soft_value_iteration(risk, g, self.horizon, self.gamma)
+            t["vi"] = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            svf, _ = state_visitation(policy, torch.tensor([start]), self.horizon)
+            t["svf"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        waypoints = sample_trajectory(policy[0], start, self.horizon, self.grid, self.sampler,
+                                      seed=self.seed * 1_000_003 + self._calls)
+        t["sampler"] = time.perf_counter() - t0
+        self._calls += 1
+        t["total"] = sum(t.values())
+        return Plan(waypoints, risk[0].numpy(), goal_map(goal_cell, self.grid, self.goal_variance),
+                    policy[0].numpy(), svf[0].numpy(), goal_cell, t)
+
+
+def check_plan(plan: Plan, name: str) -> Plan:
+    if plan.waypoints.shape != (PLAN_STEPS, 2) or not np.isfinite(plan.waypoints).all():
+        raise InputError(f"planner {name} returned waypoints of shape {plan.waypoints.shape} or "
+                         "non-finite values; expected finite [12, 2]")
+    return plan

@@ -1,0 +1,29 @@
+"""One parser for planner SPEC strings (DESIGN §2).
+
+    idm              the IDM/MOBIL "human": the ego drives itself, no plan is made
+    riskmap:PATH     the risk-map planner from a checkpoint (PATH with or without .safetensors)
+"""
+
+from __future__ import annotations
+
+from rasterize.errors import InputError
+
+SPECS = ("idm", "riskmap:PATH")
+
+
+class HumanDriver:
+    """Marker for `idm`: the simulator's IDM/MOBIL ego keeps driving itself."""
+
+    name = "idm"
+
+
+def make_planner(spec: str, seed: int = 0):
+    """A `Planner` (or `HumanDriver`) for `spec`."""
+    kind, _, arg = spec.partition(":")
+    if kind == "idm" and not arg:
+        return HumanDriver()
+    if kind == "riskmap" and arg:
+        from riskmap.planner import RiskMapPlanner
+
+        return RiskMapPlanner.load(arg, seed=seed)
+    raise InputError(f"unknown planner spec {spec!r}; use one of {', '.join(SPECS)}")
