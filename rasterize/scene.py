@@ -168,6 +168,21 @@ class Scene:
         route = None if self.route_xy is None else self.route_xy @ rot_t
         return replace(self, states=states, lanes=lanes, route_xy=route)
 
+    def with_ego_perturbed(self, heading_rad: float, lateral_m: float) -> Scene:
+        """The scene with the ego now turned by `heading_rad` and shifted `lateral_m` to its left.
+
+        Only the ego's current state changes: its history and recorded future stay, so a
+        demonstration from the perturbed pose shows how to get back onto the recorded path.
+        Training on such scenes teaches recovery from the drift a closed loop produces.
+        """
+        states = self.states.copy()
+        ego, now = self.ego_index, self.current_index
+        hx, hy = states[ego, now, 2:4]
+        c, s = np.cos(heading_rad), np.sin(heading_rad)
+        states[ego, now, 0:2] += lateral_m * np.array([-hy, hx])
+        states[ego, now, 2:4] = [c * hx - s * hy, s * hx + c * hy]
+        return replace(self, states=states)
+
     def ego_state(self) -> np.ndarray:
         """The ego's current state [6]."""
         return self.states[self.ego_index, self.current_index]

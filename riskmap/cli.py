@@ -70,6 +70,15 @@ def _cmd_drive(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_figures_plans(args: argparse.Namespace) -> int:
+    from riskmap.figures import plan_figures
+
+    paths = plan_figures(Path(args.checkpoint), Path(args.data), Path(args.out), args.count,
+                         args.seed)
+    print(f"wrote {len(paths)} PNGs to {args.out}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="riskmap", description=__doc__)
     sub = parser.add_subparsers(dest="command", required=True)
@@ -129,6 +138,13 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--out", required=True, help="directory for the PNGs")
     q.add_argument("--count", type=_positive_int, default=8)
     q.set_defaults(func=_cmd_figures_scenes)
+    q = fig_sub.add_parser("plans", help="BEV | risk map | goal map | SVF | plan vs demo panels")
+    q.add_argument("--checkpoint", required=True, help="risk-map planner checkpoint")
+    q.add_argument("--data", required=True, help="dataset directory (same raster config)")
+    q.add_argument("--out", required=True, help="directory for the PNGs")
+    q.add_argument("--count", type=_positive_int, default=6)
+    q.add_argument("--seed", type=int, default=0)
+    q.set_defaults(func=_cmd_figures_plans)
     return parser
 
 

@@ -20,8 +20,9 @@ PLAN_TIMES_S = 0.5 * np.arange(1, 13)
 
 @dataclass(frozen=True)
 class ControllerConfig:
-    lookahead_min_m: float = 5.0
-    lookahead_time_s: float = 0.9       # lookahead distance = max(min, speed × time)
+    lookahead_min_m: float = 6.0
+    lookahead_time_s: float = 1.2       # lookahead distance = max(min, speed × time): long
+                                        # enough to smooth over the grid path's staircase
     wheelbase_m: float = 5.0            # highway-env's bicycle: yaw rate ≈ v·δ / vehicle length
     kp_per_s: float = 1.2               # acceleration per m/s of speed error
     ki_per_s2: float = 0.15

@@ -122,9 +122,12 @@ class DemoDataset(_TorchDataset):
         return unpack_scene(self._shards[shard], local, source=self.source)
 
     def __getitem__(self, index: int) -> dict:
+        return self.sample(self.scene(index))
+
+    def sample(self, scene: Scene) -> dict:
+        """The training sample (see the module docstring) of a scene with a recorded future."""
         import torch
 
-        scene = self.scene(index)
         origin, heading = ego_pose(scene)
         counts, goal = demo_visitation(scene, self.grid)
         path = np.full((3 * self.grid.rows, 2), -1, dtype=np.int64)
@@ -146,3 +149,31 @@ class DemoDataset(_TorchDataset):
             "future": ego_from_world(scene.ego_future_xy(), origin, heading).astype(np.float32),
         }
         return {k: torch.from_numpy(np.ascontiguousarray(v)) for k, v in sample.items()}
+
+
+class PerturbedEgo(_TorchDataset):
+    """Training-time augmentation: with probability `probability` the ego's current pose is turned
+    by up to ±`max_heading_deg` and shifted up to ±`max_lateral_m` sideways (uniformly), its
+    recorded future kept (see `Scene.with_ego_perturbed`). Draws depend only on (seed, epoch,
+    index), so a resumed run sees the same samples."""
+
+    def __init__(self, base: DemoDataset, seed: int = 0, probability: float = 0.5,
+                 max_heading_deg: float = 10.0, max_lateral_m: float = 1.0):
+        self.base, self.seed, self.probability = base, seed, probability
+        self.max_heading = np.deg2rad(max_heading_deg)
+        self.max_lateral = max_lateral_m
+        self.epoch = 0
+
+    def set_epoch(self, epoch: int) -> None:
+        self.epoch = epoch
+
+    def __len__(self) -> int:
+        return len(self.base)
+
+    def __getitem__(self, index: int) -> dict:
+        scene = self.base.scene(index)
+        rng = np.random.default_rng([self.seed, self.epoch, index])
+        if rng.random() < self.probability:
+            scene = scene.with_ego_perturbed(rng.uniform(-self.max_heading, self.max_heading),
+                                             rng.uniform(-self.max_lateral, self.max_lateral))
+        return self.base.sample(scene)

@@ -105,3 +105,72 @@ def scene_figures(data: Path, out: Path, count: int) -> list[Path]:
         paths.append(save_scene_png(scene, dataset.raster_config, Path(out) / f"scene_{i:05d}.png",
                                     title))
     return paths
+
+
+def save_plan_panels(scene: Scene, plan, config: RasterConfig, grid, path: Path,
+                     title: str = "") -> Path:
+    """Planner paper Fig. 2-style row: BEV | risk map | goal map | SVF | plan vs demonstration."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ext = config.extent
+    extent = (ext.left_m, -ext.right_m, -ext.back_m, ext.front_m)
+    fig, axes = plt.subplots(1, 5, figsize=(17, 4.4), dpi=100)
+    axes[0].imshow(raster_to_rgb(rasterize_scene(scene, config)), extent=extent, aspect="auto",
+                   interpolation="nearest")
+    axes[0].set_title("BEV raster")
+    panels = [(plan.risk_map, "risk map (reward, <= 0)", "magma"),
+              (plan.goal_map, "goal map", "viridis"),
+              (np.log10(np.maximum(plan.svf, 1e-4)), "SVF (log10 expected visits)", "inferno")]
+    for ax, (image, name, cmap) in zip(axes[1:4], panels):
+        im = ax.imshow(image, extent=extent, aspect="auto", cmap=cmap, interpolation="nearest")
+        fig.colorbar(im, ax=ax, fraction=0.046, pad=0.02)
+        ax.set_title(name)
+    ax = axes[4]
+    ax.imshow(raster_to_rgb(rasterize_scene(scene, config)), extent=extent, aspect="auto",
+              interpolation="nearest", alpha=0.6)
+    if scene.num_future_steps and scene.valid[scene.ego_index, scene.current_index + 1:].all():
+        origin, heading = ego_pose(scene)
+        demo = np.concatenate([[[0.0, 0.0]], ego_from_world(scene.ego_future_xy(), origin, heading)])
+        ax.plot(demo[:, 1], demo[:, 0], "-o", color="#3ddc84", ms=3, lw=1.5, label="demonstration")
+    mine = np.concatenate([[[0.0, 0.0]], plan.waypoints])
+    ax.plot(mine[:, 1], mine[:, 0], "-o", color="#ff66ff", ms=3, lw=1.5, label="plan")
+    ax.legend(loc="upper right", fontsize=7)
+    ax.set_title("plan vs demonstration")
+    for ax in axes:
+        ax.set_xlim(ext.left_m, -ext.right_m)
+        ax.set_ylim(-ext.back_m, ext.front_m)
+        ax.set_xlabel("lateral y (m)")
+    axes[0].set_ylabel("forward x (m)")
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def plan_figures(checkpoint: Path, data: Path, out: Path, count: int, seed: int = 0) -> list[Path]:
+    """Fig. 2-style panels of `count` windows spread over a dataset, planned by a checkpoint."""
+    from riskmap.data import DemoDataset
+    from riskmap.planner import RiskMapPlanner
+
+    planner = RiskMapPlanner.load(checkpoint, seed=seed)
+    dataset = DemoDataset(data, planner.grid.rows, raster=planner.raster)
+    picks = np.unique(np.linspace(0, len(dataset) - 1, min(count, len(dataset))).astype(int))
+    paths = []
+    for i in picks:
+        scene = dataset.scene(int(i))
+        plan = planner.plan(scene)
+        origin, heading = ego_pose(scene)
+        demo = ego_from_world(scene.ego_future_xy(), origin, heading)
+        ade = float(np.linalg.norm(plan.waypoints - demo, axis=1).mean())
+        title = (f"{dataset.source} window {i}: ego {scene.ego_state()[4]:.1f} m/s, "
+                 f"ADE {ade:.1f} m, plan {1000 * plan.timings_s['total']:.0f} ms")
+        paths.append(save_plan_panels(scene, plan, planner.raster, planner.grid,
+                                      Path(out) / f"plan_{i:05d}.png", title))
+    return paths

@@ -22,7 +22,7 @@ from torch.utils.data import DataLoader, Subset
 from rasterize.errors import InputError
 from riskmap.atomic import atomic_write
 from riskmap.checkpoint import read_sidecar, save_checkpoint
-from riskmap.data import DemoDataset
+from riskmap.data import DemoDataset, PerturbedEgo
 from riskmap.irl import IRLConfig, demo_negative_log_likelihood, irl_step
 from riskmap.model import ModelConfig, RiskMapGenerator, load_backbone_weights
 from riskmap.sampler import SamplerConfig, sample_trajectory
@@ -47,7 +47,10 @@ class TrainConfig:
     horizon: int | None = None          # value-iteration steps; default 1.6 × resolution
     gamma: float = 1.0
     val_fraction: float = 0.15          # share of episodes held out
-    val_ade_windows: int = 64           # validation windows on which the sampler runs
+    val_ade_windows: int = 128          # validation windows on which the sampler runs
+    augment_probability: float = 0.5    # share of training windows with a perturbed ego pose
+    augment_heading_deg: float = 10.0
+    augment_lateral_m: float = 1.0
     seed: int = 0
     device: str = "auto"
     backbone_weights: str | None = None
@@ -150,6 +153,8 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
     if config.max_windows:
         train_idx = train_idx[: config.max_windows]
         val_idx = val_idx[: max(1, config.max_windows // 4)]
+    augmented = PerturbedEgo(dataset, config.seed, config.augment_probability,
+                             config.augment_heading_deg, config.augment_lateral_m)
     model_config = ModelConfig(in_channels=dataset[0]["raster"].shape[0],
                                resolution=config.resolution)
     model = RiskMapGenerator(model_config)
@@ -182,7 +187,8 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
         model.train()
         order = torch.randperm(len(train_idx),
                                generator=torch.Generator().manual_seed(config.seed * 100003 + epoch))
-        loader = DataLoader(Subset(dataset, [train_idx[i] for i in order]),
+        augmented.set_epoch(epoch)
+        loader = DataLoader(Subset(augmented, [train_idx[i] for i in order]),
                             batch_size=config.batch_size)
         losses, nlls = [], []
         bar = tqdm(loader, desc=f"epoch {epoch + 1}/{config.epochs}", disable=not progress,

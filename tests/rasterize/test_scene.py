@@ -62,3 +62,11 @@ def test_rotated_scene_keeps_distances():
     d1 = np.linalg.norm(rot.states[0, :, :2] - rot.states[1, :, :2], axis=1)
     np.testing.assert_allclose(d0, d1)
     assert isinstance(rot, Scene)
+
+
+def test_ego_perturbation_turns_and_shifts_only_the_current_ego_pose():
+    scene = constant_velocity_scene()       # ego heading east at the origin
+    moved = scene.with_ego_perturbed(np.pi / 2, 1.5)
+    np.testing.assert_allclose(moved.ego_state()[:4], [0.0, 1.5, 0.0, 1.0], atol=1e-12)
+    changed = np.argwhere(np.any(moved.states != scene.states, axis=-1))
+    assert changed.tolist() == [[0, scene.current_index]]
