@@ -25,14 +25,21 @@ test: $(STAMP)
 	$(BIN)/python -m pytest -q
 
 demo: $(STAMP)
-	$(BIN)/riskmap collect --env highway-v0 --episodes 4 --seed 0 --out $(DEMO_OUT)/data/highway --workers 2 --resume
-	$(BIN)/riskmap collect --env intersection-v0 --episodes 4 --seed 0 --out $(DEMO_OUT)/data/intersection --workers 2 --resume
-	$(BIN)/riskmap figures scenes --data $(DEMO_OUT)/data/highway --out $(DEMO_OUT)/figures/highway --count 4
-	$(BIN)/riskmap figures scenes --data $(DEMO_OUT)/data/intersection --out $(DEMO_OUT)/figures/intersection --count 4
-	@echo "demo: datasets in $(DEMO_OUT)/data, figures in $(DEMO_OUT)/figures"
+	$(BIN)/riskmap collect --env highway-v0 --episodes 2 --seed 2000 --out $(DEMO_OUT)/data/highway --workers 2 --resume
+	$(BIN)/riskmap collect --env intersection-v0 --episodes 6 --seed 2000 --out $(DEMO_OUT)/data/intersection --workers 2 --resume
+	$(BIN)/riskmap figures scenes --data $(DEMO_OUT)/data/highway --out $(DEMO_OUT)/figures/scenes_highway --count 3
+	$(BIN)/riskmap figures scenes --data $(DEMO_OUT)/data/intersection --out $(DEMO_OUT)/figures/scenes_intersection --count 3
+	$(BIN)/riskmap figures plans --checkpoint checkpoints/riskmap_highway --data $(DEMO_OUT)/data/highway --out $(DEMO_OUT)/figures/plans_highway --count 4
+	$(BIN)/riskmap figures plans --checkpoint checkpoints/riskmap_intersection --data $(DEMO_OUT)/data/intersection --out $(DEMO_OUT)/figures/plans_intersection --count 4
+	$(BIN)/riskmap drive --checkpoint checkpoints/riskmap_highway --env highway-v0 --episodes 2 --seed 0 --out $(DEMO_OUT)/drive/highway --resume
+	$(BIN)/riskmap drive --planner idm --env highway-v0 --episodes 2 --seed 0 --out $(DEMO_OUT)/drive/highway_idm --resume
+	$(BIN)/riskmap drive --checkpoint checkpoints/riskmap_intersection --env intersection-v0 --episodes 2 --seed 0 --out $(DEMO_OUT)/drive/intersection --frames --resume
+	$(BIN)/riskmap drive --planner idm --env intersection-v0 --episodes 2 --seed 0 --out $(DEMO_OUT)/drive/intersection_idm --resume
+	@echo "demo: figures in $(DEMO_OUT)/figures, closed-loop runs (and frames) in $(DEMO_OUT)/drive"
 
 bench: $(STAMP)
 	$(BIN)/python experiments/bench_collect.py
+	$(BIN)/python experiments/bench_planner.py
 
 clean:
 	rm -rf out .pytest_cache

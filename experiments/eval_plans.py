@@ -1,0 +1,79 @@
+"""Open-loop plan quality of a checkpoint on held-out windows: ADE, FDE, goal error, SVF overlap.
+
+For every window of a dataset collected with another seed than the training data:
+    ADE / FDE      plan waypoints vs the recorded 6 s future (m)
+    goal error     plan's last waypoint vs the centre of the goal cell the planner was given (m)
+    overlap        Σ SVF ⊙ N / Σ SVF: share of the policy's expected visits on cells covered by
+                   the ado agents' uncertainty map N (σ from the checkpoint's training)
+Writes a JSON per checkpoint into --out and prints a table.
+
+    .venv/bin/python experiments/eval_plans.py --data data/highway_heldout \
+        --checkpoints checkpoints/highway.safetensors [more ...] --out experiments/results/plans
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from rasterize.frames import ego_from_grid, ego_from_world, ego_pose
+from rasterize.maps import uncertainty_map
+from riskmap.data import DemoDataset
+from riskmap.planner import RiskMapPlanner
+
+
+def evaluate(checkpoint: Path, data: Path, limit: int | None = None, seed: int = 0) -> dict:
+    planner = RiskMapPlanner.load(checkpoint, seed=seed)
+    side = json.loads(Path(checkpoint).with_suffix(".json").read_text())
+    sx, sy = side["maps"]["sigma_x"], side["maps"]["sigma_y"]
+    dataset = DemoDataset(data, planner.grid.rows, raster=planner.raster)
+    picks = range(len(dataset)) if limit is None else \
+        np.unique(np.linspace(0, len(dataset) - 1, limit).astype(int))
+    ade, fde, goal_err, overlap, ms = [], [], [], [], []
+    for i in picks:
+        scene = dataset.scene(int(i))
+        plan = planner.plan(scene)
+        origin, heading = ego_pose(scene)
+        demo = ego_from_world(scene.ego_future_xy(), origin, heading)
+        err = np.linalg.norm(plan.waypoints - demo, axis=1)
+        ade.append(err.mean())
+        fde.append(err[-1])
+        goal_err.append(np.linalg.norm(plan.waypoints[-1] - ego_from_grid(plan.goal_cell,
+                                                                          planner.grid)))
+        unc = uncertainty_map(scene, planner.grid, sx, sy)
+        overlap.append(float((plan.svf * unc).sum() / max(plan.svf.sum(), 1e-9)))
+        ms.append(1000 * plan.timings_s["total"])
+
+    def stats(x):
+        return {"mean": float(np.mean(x)), "p90": float(np.percentile(x, 90))}
+
+    return {"checkpoint": str(checkpoint), "data": str(data), "windows": len(ade),
+            "ade_m": stats(ade), "fde_m": stats(fde), "goal_error_m": stats(goal_err),
+            "svf_uncertainty_overlap": stats(overlap), "plan_ms_median": float(np.median(ms)),
+            "uncertainty_weight": side["irl"]["uncertainty_weight"]}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data", type=Path, required=True)
+    parser.add_argument("--checkpoints", type=Path, nargs="+", required=True)
+    parser.add_argument("--limit", type=int, default=None, help="evaluate this many windows")
+    parser.add_argument("--out", type=Path, default=Path("experiments/results/plans"))
+    args = parser.parse_args()
+    args.out.mkdir(parents=True, exist_ok=True)
+    print(f"{'checkpoint':40s} {'v':>5s} {'windows':>7s} {'ADE':>6s} {'FDE':>6s} {'goal':>6s} "
+          f"{'overlap':>8s}")
+    for ckpt in args.checkpoints:
+        r = evaluate(ckpt, args.data, args.limit)
+        name = f"{ckpt.parent.name}_{ckpt.stem}_{args.data.name}.json"
+        (args.out / name).write_text(json.dumps(r, indent=2) + "\n")
+        print(f"{str(ckpt):40s} {r['uncertainty_weight']:5.1f} {r['windows']:7d} "
+              f"{r['ade_m']['mean']:6.2f} {r['fde_m']['mean']:6.2f} {r['goal_error_m']['mean']:6.2f} "
+              f"{r['svf_uncertainty_overlap']['mean']:8.4f}")
+
+
+if __name__ == "__main__":
+    main()
