@@ -54,9 +54,9 @@ def pack_scenes(scenes: list[Scene]) -> dict[str, np.ndarray]:
     for key in ("centre", "left", "right"):
         pts = [getattr(lane, key) for lane in lanes]
         out[f"lane_{key}"] = (np.concatenate(pts) if pts else np.zeros((0, 2))).astype(np.float32)
-    out["lane_lines"] = np.array([[l.left_line, l.right_line] for l in lanes], np.int8).reshape(-1, 2)
-    out["lane_width_m"] = np.array([l.width_m for l in lanes], np.float32)
-    out["lane_start_s"] = np.array([l.start_s for l in lanes], np.float32)
+    out["lane_lines"] = np.array([[ln.left_line, ln.right_line] for ln in lanes], np.int8).reshape(-1, 2)
+    out["lane_width_m"] = np.array([ln.width_m for ln in lanes], np.float32)
+    out["lane_start_s"] = np.array([ln.start_s for ln in lanes], np.float32)
     k = max((len(s.route_xy) for s in scenes if s.route_xy is not None), default=1)
     out["route_xy"] = np.zeros((w, k, 2), np.float32)
     out["has_route"] = np.array([s.route_xy is not None for s in scenes])

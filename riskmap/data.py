@@ -31,7 +31,7 @@ from rasterize.maps import (
 from rasterize.raster import rasterize_scene
 from rasterize.scene import Scene
 from rasterize.scene_io import check_packed, unpack_scene
-from riskmap.collect import INDEX, MANIFEST
+from riskmap.collect import FORMAT_VERSION, INDEX, MANIFEST
 
 try:  # torch is optional for reading scenes, required for DataLoader use
     from torch.utils.data import Dataset as _TorchDataset
@@ -79,6 +79,10 @@ class DemoDataset(_TorchDataset):
         self.goal_source = goal
         self.root = Path(root)
         self.manifest = load_manifest(self.root)
+        version = self.manifest.get("config", {}).get("format_version")
+        if version != FORMAT_VERSION:
+            raise InputError(f"dataset {self.root} has format version {version}, this toolkit reads "
+                             f"version {FORMAT_VERSION}; collect it again with `riskmap collect`")
         collected = RasterConfig.from_dict(self.manifest["config"]["raster"])
         if raster is not None and raster != collected:
             raise InputError(

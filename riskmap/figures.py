@@ -25,6 +25,17 @@ _PALETTE = (
 _BACKGROUND = (0.10, 0.11, 0.12)
 
 
+def _save(fig, path: Path) -> Path:
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
 def raster_to_rgb(raster: np.ndarray) -> np.ndarray:
     """uint8 [C, H, W] raster into an RGB float image [H, W, 3]: each layer alpha-blended on top."""
     rgb = np.broadcast_to(np.array(_BACKGROUND), raster.shape[1:] + (3,)).copy()
@@ -84,12 +95,7 @@ def save_scene_png(scene: Scene, config: RasterConfig, path: Path, title: str = 
                  f"{int(scene.valid[:, scene.current_index].sum()) - 1} other agents{note}",
                  fontsize=9)
     ax.legend(handles=handles, loc="upper right", fontsize=6.5, framealpha=0.8)
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
 
 
 def scene_figures(data: Path, out: Path, count: int) -> list[Path]:
@@ -146,12 +152,7 @@ def save_plan_panels(scene: Scene, plan, config: RasterConfig, grid, path: Path,
     axes[0].set_ylabel("forward x (m)")
     if title:
         fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path)
-    plt.close(fig)
-    return path
+    return _save(fig, path)
 
 
 def plan_figures(checkpoint: Path, data: Path, out: Path, count: int, seed: int = 0) -> list[Path]:

@@ -9,10 +9,9 @@ future on a fixed subset). Writes RUN/log.csv, TensorBoard scalars in RUN/tb/, R
 from __future__ import annotations
 
 import csv
-import json
 import math
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
