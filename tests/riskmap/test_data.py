@@ -70,3 +70,18 @@ def test_corrupt_and_empty_shards_are_named(tmp_path, dataset_dir):
         DemoDataset(d)
     with pytest.raises(InputError, match="not a dataset"):
         DemoDataset(tmp_path / "nowhere")
+
+
+def test_perturbed_ego_is_deterministic_per_epoch_and_keeps_the_future(dataset_dir):
+    from riskmap.data import PerturbedEgo
+
+    base = DemoDataset(dataset_dir)
+    aug = PerturbedEgo(base, seed=1, probability=1.0, max_heading_deg=10, max_lateral_m=1.0)
+    aug.set_epoch(3)
+    a, b = aug[7], aug[7]
+    torch.testing.assert_close(a["raster"], b["raster"])
+    aug.set_epoch(4)
+    c = aug[7]
+    assert not torch.equal(a["raster"], c["raster"])
+    # The recorded future is the same path, seen from a slightly different pose.
+    assert torch.linalg.norm(a["future"] - base[7]["future"], dim=1).max() < 0.2 * 150 + 1.0
