@@ -34,10 +34,13 @@ def sample_paths(policy: torch.Tensor, start: tuple[int, int], horizon: int, sam
     path[:, 0] = cells
     alive = torch.ones(samples, dtype=torch.bool)
     length = torch.zeros(samples, dtype=torch.long)
-    probs_all = policy.permute(1, 2, 0).reshape(h * w, 5).double()
+    # Inverse-CDF sampling with all uniforms drawn at once: one comparison per step instead of a
+    # multinomial call (the policy rows sum to 1; the last bin takes any rounding remainder).
+    cdf = policy.permute(1, 2, 0).reshape(h * w, 5).double().cumsum(dim=1)
+    cdf[:, -1] = 1.0
+    uniforms = torch.rand((horizon, samples, 1), generator=generator, dtype=torch.float64)
     for t in range(horizon):
-        probs = probs_all[cells[:, 0] * w + cells[:, 1]]
-        action = torch.multinomial(probs, 1, generator=generator).squeeze(1)
+        action = (uniforms[t] >= cdf[cells[:, 0] * w + cells[:, 1]]).sum(dim=1).clamp(max=END)
         alive &= action != END
         step = moves[action.clamp(max=END - 1)] * alive.unsqueeze(1)
         cells = cells + step
