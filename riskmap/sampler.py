@@ -53,14 +53,25 @@ def sample_paths(policy: torch.Tensor, start: tuple[int, int], horizon: int, sam
 
 
 def downsample(paths: np.ndarray, moves: np.ndarray, count: int, grid: GridConfig) -> np.ndarray:
-    """[S, count, 2] waypoints (ego metres) evenly spaced along each path's cells, start excluded.
+    """[S, count, 2] waypoints (ego metres) evenly spaced in distance along each path, start
+    excluded. paths [S, N + 1, 2] cells; moves [S] number of moves of each path.
 
-    paths [S, N + 1, 2] cells, moves [S] number of moves of each path.
+    Spacing is by metres along the cell centres, not by cell count: highway cells are 4.8 m long
+    and 0.8 m wide, and counting cells would make a lane change look like braking.
     """
-    frac = np.linspace(0.0, 1.0, count + 1)[1:]
-    idx = np.round(moves[:, None] * frac[None, :]).astype(int)              # [S, count]
-    cells = np.take_along_axis(paths, idx[..., None], axis=1)              # [S, count, 2]
-    return ego_from_grid(cells, grid)
+    centres = ego_from_grid(paths, grid)                                    # [S, N + 1, 2]
+    step = np.linalg.norm(np.diff(centres, axis=1), axis=2)                 # [S, N]
+    step[np.arange(step.shape[1])[None, :] >= moves[:, None]] = 0.0        # beyond the end
+    cum = np.concatenate([np.zeros((len(step), 1)), np.cumsum(step, axis=1)], axis=1)
+    targets = cum[:, -1:] * np.linspace(0.0, 1.0, count + 1)[None, 1:]     # [S, count]
+    # Index of the first cumulative length >= target, and the fraction within that move.
+    hi = np.minimum((cum[:, None, :] < targets[:, :, None] - 1e-9).sum(axis=2), cum.shape[1] - 1)
+    lo = np.maximum(hi - 1, 0)
+    c_lo, c_hi = np.take_along_axis(cum, lo, 1), np.take_along_axis(cum, hi, 1)
+    frac = np.where(c_hi > c_lo, (targets - c_lo) / np.maximum(c_hi - c_lo, 1e-12), 0.0)
+    p_lo = np.take_along_axis(centres, lo[..., None], 1)
+    p_hi = np.take_along_axis(centres, hi[..., None], 1)
+    return p_lo + frac[..., None] * (p_hi - p_lo)
 
 
 def sample_trajectory(policy: torch.Tensor, start: tuple[int, int], horizon: int, grid: GridConfig,

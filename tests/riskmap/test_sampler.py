@@ -37,3 +37,17 @@ def test_trajectory_goes_to_the_goal_and_is_deterministic():
     # Goal cell (2, 10) has its centre at x = 7.5, y = -0.5; start (15, 10) at x = -5.5.
     np.testing.assert_allclose(a[-1], [7.5, -0.5])
     assert np.all(np.diff(a[:, 0]) >= 0)                     # straight up, never back
+
+
+def test_waypoints_are_evenly_spaced_in_metres_on_non_square_cells():
+    from riskmap.sampler import downsample
+
+    grid = GridConfig(Extent(200.0, 40.0, 20.0, 20.0), rows=50, cols=50)   # 4.8 m x 0.8 m cells
+    # 10 moves up, then 5 moves left: 48 m forward and 4 m sideways.
+    cells = [(40, 25)] + [(40 - k, 25) for k in range(1, 11)] + [(30, 25 - k) for k in range(1, 6)]
+    paths = np.array(cells)[None]
+    wp = downsample(paths, np.array([15]), 12, grid)[0]
+    x0, y0 = grid.extent.front_m - 40.5 * 4.8, grid.extent.left_m - 25.5 * 0.8   # start centre
+    s = 52.0 * np.arange(1, 13) / 12                      # equal arc-length steps of 4.33 m
+    expected = np.stack([x0 + np.minimum(s, 48.0), y0 + np.maximum(s - 48.0, 0.0)], axis=1)
+    np.testing.assert_allclose(wp, expected, atol=1e-9)
