@@ -93,15 +93,21 @@ def lanes_near(network, centre_world: np.ndarray, sampling: LaneSampling = LaneS
 class RouteRule:
     """Where the planner is sent: along the ego's route, as far as it could get in `horizon_s`.
 
-    distance = min(speed_limit x horizon, speed x horizon + accel x horizon² / 2): the ego keeps
-    its speed and gains `accel_mps2` until the lane's speed limit, so a stopped ego still gets a
-    goal ahead and a fast one is not sent beyond the limit. Used alike for training goal maps and
-    in closed loop, from present information only.
+    free distance = min(speed_limit × horizon, speed × horizon + accel × horizon² / 2): keep the
+    speed and gain `accel_mps2` up to the lane's speed limit, so a stopped ego still gets a goal
+    ahead and a fast one is not sent beyond the limit. A leader on the route (a vehicle within
+    `lane_half_width_m` of it, ahead) caps the distance at where the leader will be after
+    `horizon_s` at its current speed, less a standstill gap and a time headway. Present
+    information only; used alike for training goal maps and in closed loop.
     """
 
     horizon_s: float = 6.0
     accel_mps2: float = 1.0
+    standstill_gap_m: float = 5.0
+    headway_s: float = 1.5
+    lane_half_width_m: float = 2.0
     points: int = 13          # samples from the ego (distance 0) to the goal, evenly spaced
+    sample_m: float = 2.0     # spacing of the route samples used to find a leader
 
 
 def _route_lanes(network, vehicle, length_needed: float) -> list:
@@ -135,14 +141,31 @@ def route_ahead(road, vehicle, rule: RouteRule = RouteRule()) -> np.ndarray:
     speed = max(float(vehicle.speed), 0.0)
     limit = float(getattr(lane, "speed_limit", None) or speed or 10.0)
     t = rule.horizon_s
-    distance = min(limit * t, speed * t + 0.5 * rule.accel_mps2 * t * t)
+    free = min(limit * t, speed * t + 0.5 * rule.accel_mps2 * t * t)
+    reach = free + 40.0                                   # look for leaders a little further
     s0 = float(lane.local_coordinates(vehicle.position)[0])
-    route = _route_lanes(network, vehicle, s0 + distance)
-    pts = [network.position_heading_along_route(route, s0 + d, 0.0, vehicle.lane_index)[0]
-           for d in np.linspace(0.0, distance, rule.points)]
-    pts = world_from_highway_env(np.asarray(pts))
-    pts[0] = world_from_highway_env(vehicle.position)   # start exactly at the ego
-    return pts
+    route = _route_lanes(network, vehicle, s0 + reach)
+    along = np.arange(0.0, reach + rule.sample_m, rule.sample_m)
+    dense = np.asarray([network.position_heading_along_route(route, s0 + d, 0.0,
+                                                             vehicle.lane_index)[0] for d in along])
+    dense[0] = vehicle.position
+    distance = free
+    for other in road.vehicles:
+        if other is vehicle or np.linalg.norm(other.position - vehicle.position) > reach + 10.0:
+            continue
+        offsets = np.linalg.norm(dense - other.position, axis=1)
+        j = int(np.argmin(offsets))
+        if j == 0 or offsets[j] > rule.lane_half_width_m:
+            continue                                      # beside or behind, or off the route
+        direction = dense[min(j + 1, len(dense) - 1)] - dense[max(j - 1, 0)]
+        direction /= max(np.linalg.norm(direction), 1e-9)
+        v_lead = max(0.0, float(np.dot(other.velocity, direction)))
+        gap = along[j] - 0.5 * (vehicle.LENGTH + other.LENGTH)
+        cap = gap + v_lead * t - (rule.standstill_gap_m + v_lead * rule.headway_s)
+        distance = min(distance, max(0.0, cap))
+    ds = np.linspace(0.0, distance, rule.points)
+    pts = np.stack([np.interp(ds, along, dense[:, 0]), np.interp(ds, along, dense[:, 1])], axis=1)
+    return world_from_highway_env(pts)
 
 
 def _wrap(angle: np.ndarray) -> np.ndarray:

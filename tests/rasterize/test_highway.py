@@ -98,3 +98,38 @@ def test_lanes_near_crops_long_lanes():
     for lane in lanes:
         assert lane.centre[:, 0].min() >= 449.0 and lane.centre[:, 0].max() <= 551.0
         assert lane.centre.shape[0] == 2      # straight lanes simplify to their two ends
+
+
+def _lone_ego(speed):
+    env = gym.make("highway-v0", config={"vehicles_count": 0, "simulation_frequency": 10})
+    env.reset(seed=0)
+    ego = env.unwrapped.vehicle
+    ego.speed = speed
+    return env, ego
+
+
+def test_route_rule_free_road_hand_computed():
+    from rasterize.highway import RouteRule, route_ahead
+
+    env, ego = _lone_ego(20.0)
+    route = route_ahead(env.unwrapped.road, ego, RouteRule())
+    # min(30 m/s x 6 s, 20 x 6 + 1 x 36 / 2) = 138 m straight ahead along the lane.
+    travelled = route[-1] - route[0]
+    assert travelled[0] == pytest.approx(138.0, abs=1e-6) and abs(travelled[1]) < 1e-6
+    assert len(route) == 13
+
+
+def test_route_rule_stops_behind_a_leader_hand_computed():
+    from highway_env.vehicle.kinematics import Vehicle
+
+    from rasterize.highway import RouteRule, route_ahead
+
+    env, ego = _lone_ego(20.0)
+    road = env.unwrapped.road
+    leader = Vehicle(road, ego.position + np.array([35.0, 0.0]), heading=0.0, speed=10.0)
+    road.vehicles.append(leader)
+    beside = Vehicle(road, ego.position + np.array([20.0, 4.0]), heading=0.0, speed=0.0)
+    road.vehicles.append(beside)                   # next lane: does not cap
+    route = route_ahead(road, ego, RouteRule())
+    # bumper gap 30 m, leader covers 60 m in 6 s, keep 5 m + 10 m/s x 1.5 s: 30 + 60 - 20 = 70 m.
+    assert (route[-1] - route[0])[0] == pytest.approx(70.0, abs=1.0)
