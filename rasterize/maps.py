@@ -114,7 +114,12 @@ def demo_visitation(scene: Scene, grid: GridConfig) -> tuple[np.ndarray, np.ndar
     cell path, and ends at the last cell inside the grid, where the goal one-hot sits (the
     planner's `end` action).
     """
-    path = demo_path_cells(scene, grid)
+    return visitation_from_path(demo_path_cells(scene, grid), grid)
+
+
+def visitation_from_path(path: list[tuple[int, int]], grid: GridConfig
+                         ) -> tuple[np.ndarray, np.ndarray]:
+    """(visit counts, goal one-hot at the path's last cell), each [rows, cols]."""
     counts = np.zeros((grid.rows, grid.cols), dtype=np.float32)
     goal = np.zeros_like(counts)
     for r, c in path:

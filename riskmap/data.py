@@ -26,7 +26,8 @@ from rasterize.config import RasterConfig
 from rasterize.errors import InputError
 from rasterize.frames import ego_from_world, ego_pose
 from rasterize.maps import (
-    demo_path_cells, demo_visitation, goal_map, motion_features, route_goal_cell, start_cell, uncertainty_map,
+    demo_path_cells, goal_map, motion_features, route_goal_cell, start_cell, uncertainty_map,
+    visitation_from_path,
 )
 from rasterize.raster import rasterize_scene
 from rasterize.scene import Scene
@@ -133,9 +134,10 @@ class DemoDataset(_TorchDataset):
         import torch
 
         origin, heading = ego_pose(scene)
-        counts, goal = demo_visitation(scene, self.grid)
+        cells = demo_path_cells(scene, self.grid)
+        counts, goal = visitation_from_path(cells, self.grid)
         path = np.full((3 * self.grid.rows, 2), -1, dtype=np.int64)
-        cells = demo_path_cells(scene, self.grid)[: len(path)]
+        cells = cells[: len(path)]
         path[: len(cells)] = cells
         if self.goal_source == "route":
             goal_cell = route_goal_cell(scene, self.grid)
