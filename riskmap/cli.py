@@ -121,7 +121,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("drive", help="drive closed-loop episodes with a planner")
     p.add_argument("--checkpoint", help="risk-map planner checkpoint (same as --planner riskmap:CKPT)")
-    p.add_argument("--planner", help="planner SPEC: idm or riskmap:PATH")
+    p.add_argument("--planner", help="planner SPEC: idm, cv or riskmap:PATH")
     p.add_argument("--env", required=True)
     p.add_argument("--episodes", type=_positive_int, required=True)
     p.add_argument("--seed", type=int, default=0)

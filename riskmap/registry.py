@@ -1,6 +1,7 @@
 """One parser for planner SPEC strings (DESIGN §2).
 
     idm              the IDM/MOBIL "human": the ego drives itself, no plan is made
+    cv               constant velocity: current speed and heading for 6 s
     riskmap:PATH     the risk-map planner from a checkpoint (PATH with or without .safetensors)
 """
 
@@ -8,7 +9,7 @@ from __future__ import annotations
 
 from rasterize.errors import InputError
 
-SPECS = ("idm", "riskmap:PATH")
+SPECS = ("idm", "cv", "riskmap:PATH")
 
 
 class HumanDriver:
@@ -22,6 +23,10 @@ def make_planner(spec: str, seed: int = 0):
     kind, _, arg = spec.partition(":")
     if kind == "idm" and not arg:
         return HumanDriver()
+    if kind == "cv" and not arg:
+        from riskmap.baselines import ConstantVelocityPlanner
+
+        return ConstantVelocityPlanner()
     if kind == "riskmap" and arg:
         from riskmap.planner import RiskMapPlanner
 
