@@ -197,6 +197,7 @@ class TrafficRecorder:
         self._sizes: list[np.ndarray] = []
         self._kinds: list[int] = []
         self._last_heading: dict[int, tuple[int, float]] = {}
+        self._latest: dict[int, np.ndarray] = {}   # agent -> its most recent state [6]
         self.num_steps = 0
         self._cache = None
 
@@ -234,11 +235,16 @@ class TrafficRecorder:
             speed = float(getattr(obj, "speed", 0.0))
             state = np.array([pos[0], pos[1], np.cos(heading), np.sin(heading), speed, yaw_rate])
             self._rows.append((step, agent, state))
+            self._latest[agent] = state
         self.ego_id  # the ego is always known, even before it moves
         if self.route_rule is not None and getattr(self.ego, "lane_index", None) is not None:
             self._routes[step] = route_ahead(self.road, self.ego, self.route_rule)
         self.num_steps += 1
         self._cache = None
+
+    def latest_state(self, agent: int) -> np.ndarray:
+        """The most recently recorded state [6] of `agent` (no rebuild of the whole record)."""
+        return self._latest[agent]
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(states [A, S, 6], valid [A, S], sizes [A, 2], kinds [A]) of the whole record."""
@@ -316,6 +322,7 @@ def scene_from_highway_env(env, history_s: float = 2.0, future_s: float = 0.0, *
         recorder._rows = list(recorder._rows)
         recorder._last_heading = dict(recorder._last_heading)
         recorder._routes = dict(recorder._routes)
+        recorder._latest = dict(recorder._latest)
         road = copy.deepcopy(base.road)
         # The copies stand in for the originals: map each copy to its original's agent id.
         recorder._ids = dict(recorder._ids)

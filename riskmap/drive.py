@@ -87,7 +87,7 @@ def drive_episode(env, planner, config: DriveConfig, episode: int, frames_dir: P
                     save_plan_png(scene, plan, planner.raster,
                                   frames_dir / f"episode_{episode:06d}_t{k:04d}.png",
                                   f"{config.env_id} episode {episode} t = {run.time_s:.1f} s")
-            state = run.recorder.arrays()[0][run.recorder.ego_id, -1]
+            state = run.recorder.latest_state(run.recorder.ego_id)
             accel, steer = controller.action(state[:2], float(np.arctan2(state[3], state[2])),
                                              float(state[4]), since_plan, run.dt)
             vehicle.command(accel, steer)
