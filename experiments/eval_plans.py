@@ -25,14 +25,15 @@ from riskmap.data import DemoDataset
 from riskmap.planner import RiskMapPlanner
 
 
-def evaluate(checkpoint: Path, data: Path, limit: int | None = None, seed: int = 0) -> dict:
-    planner = RiskMapPlanner.load(checkpoint, seed=seed)
+def evaluate(checkpoint: Path, data: Path, limit: int | None = None, seed: int = 0,
+             goal_variance: float | None = None) -> dict:
+    planner = RiskMapPlanner.load(checkpoint, seed=seed, goal_variance=goal_variance)
     side = json.loads(Path(checkpoint).with_suffix(".json").read_text())
     sx, sy = side["maps"]["sigma_x"], side["maps"]["sigma_y"]
     dataset = DemoDataset(data, planner.grid.rows, raster=planner.raster)
     picks = range(len(dataset)) if limit is None else \
         np.unique(np.linspace(0, len(dataset) - 1, limit).astype(int))
-    ade, fde, goal_err, overlap, ms = [], [], [], [], []
+    ade, fde, goal_err, overlap, ms, short = [], [], [], [], [], []
     for i in picks:
         scene = dataset.scene(int(i))
         plan = planner.plan(scene)
@@ -40,6 +41,8 @@ def evaluate(checkpoint: Path, data: Path, limit: int | None = None, seed: int =
         demo = ego_from_world(scene.ego_future_xy(), origin, heading)
         err = np.linalg.norm(plan.waypoints - demo, axis=1)
         ade.append(err.mean())
+        # How far the plan's end lies behind (+) or beyond (−) the demonstration's, along x.
+        short.append(float(demo[-1, 0] - plan.waypoints[-1, 0]))
         fde.append(err[-1])
         goal_err.append(np.linalg.norm(plan.waypoints[-1] - ego_from_grid(plan.goal_cell,
                                                                           planner.grid)))
@@ -52,7 +55,8 @@ def evaluate(checkpoint: Path, data: Path, limit: int | None = None, seed: int =
 
     return {"checkpoint": str(checkpoint), "data": str(data), "windows": len(ade),
             "ade_m": stats(ade), "fde_m": stats(fde), "goal_error_m": stats(goal_err),
-            "svf_uncertainty_overlap": stats(overlap), "plan_ms_median": float(np.median(ms)),
+            "svf_uncertainty_overlap": stats(overlap),
+            "end_short_of_demo_m": stats(short), "goal_variance": planner.goal_variance, "plan_ms_median": float(np.median(ms)),
             "uncertainty_weight": side["irl"]["uncertainty_weight"]}
 
 
@@ -61,18 +65,21 @@ def main() -> None:
     parser.add_argument("--data", type=Path, required=True)
     parser.add_argument("--checkpoints", type=Path, nargs="+", required=True)
     parser.add_argument("--limit", type=int, default=None, help="evaluate this many windows")
+    parser.add_argument("--goal-variance", type=float, default=None,
+                        help="cells²; override the checkpoint's goal variance at planning time")
     parser.add_argument("--out", type=Path, default=Path("experiments/results/plans"))
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     print(f"{'checkpoint':40s} {'v':>5s} {'windows':>7s} {'ADE':>6s} {'FDE':>6s} {'goal':>6s} "
-          f"{'overlap':>8s}")
+          f"{'overlap':>8s} {'short':>6s}")
     for ckpt in args.checkpoints:
-        r = evaluate(ckpt, args.data, args.limit)
-        name = f"{ckpt.parent.name}_{ckpt.stem}_{args.data.name}.json"
+        r = evaluate(ckpt, args.data, args.limit, goal_variance=args.goal_variance)
+        suffix = "" if args.goal_variance is None else f"_gv{args.goal_variance:g}"
+        name = f"{ckpt.parent.name}_{ckpt.stem}_{args.data.name}{suffix}.json"
         (args.out / name).write_text(json.dumps(r, indent=2) + "\n")
         print(f"{str(ckpt):40s} {r['uncertainty_weight']:5.1f} {r['windows']:7d} "
               f"{r['ade_m']['mean']:6.2f} {r['fde_m']['mean']:6.2f} {r['goal_error_m']['mean']:6.2f} "
-              f"{r['svf_uncertainty_overlap']['mean']:8.4f}")
+              f"{r['svf_uncertainty_overlap']['mean']:8.4f} {r['end_short_of_demo_m']['mean']:6.1f}")
 
 
 if __name__ == "__main__":

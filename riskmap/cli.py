@@ -63,7 +63,7 @@ def _cmd_drive(args: argparse.Namespace) -> int:
     spec = args.planner or f"riskmap:{args.checkpoint}"
     config = DriveConfig(env_id=args.env, episodes=args.episodes, seed=args.seed)
     summary = drive(config, spec, Path(args.out), resume=args.resume, frames=args.frames,
-                    progress=not args.quiet)["summary"]
+                    progress=not args.quiet, goal_variance=args.goal_variance)["summary"]
     print(f"{spec} on {args.env}: {summary['episodes']} episodes, collision rate "
           f"{summary['collision_rate']:.2f}, distance {summary['distance_m']:.0f} m, "
           f"min gap {summary['min_gap_m']:.1f} m -> {Path(args.out) / 'summary.json'}")
@@ -127,6 +127,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", required=True)
     p.add_argument("--frames", action="store_true", help="write a PNG per replan")
+    p.add_argument("--goal-variance", type=float, default=None,
+                   help="cells²; planning-time goal variance of a risk-map planner (default: the "
+                        "checkpoint's)")
     p.add_argument("--resume", action="store_true")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=_cmd_drive)

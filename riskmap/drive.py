@@ -131,20 +131,23 @@ def summarise(records: list[dict]) -> dict:
 
 
 def drive(config: DriveConfig, planner_spec: str, out: Path, resume: bool = False,
-          frames: bool = False, progress: bool = True) -> dict:
+          frames: bool = False, progress: bool = True, goal_variance: float | None = None) -> dict:
     from tqdm import tqdm
 
     out = Path(out)
-    planner = make_planner(planner_spec, seed=config.seed)
+    planner = make_planner(planner_spec, seed=config.seed, goal_variance=goal_variance)
     episodes_dir = out / "episodes"
     if episodes_dir.exists() and any(episodes_dir.iterdir()) and not resume:
         raise InputError(f"--out {out} already holds driven episodes; pass --resume to continue "
                          "or choose another --out")
     meta = {"config": asdict(config), "planner": planner_spec, **provenance()}
+    if goal_variance is not None:
+        meta["goal_variance"] = goal_variance
     if resume and (out / "run.json").exists():
         previous = json.loads((out / "run.json").read_text())
         if previous["config"] | {"episodes": config.episodes} != meta["config"] or \
-                previous["planner"] != planner_spec:
+                previous["planner"] != planner_spec or \
+                previous.get("goal_variance") != meta.get("goal_variance"):
             raise InputError(f"--out {out} was driven with other settings; choose another --out")
     write_json(out / "run.json", meta)
     env = make_env(config.env_id, config.control_hz)

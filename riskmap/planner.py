@@ -67,12 +67,28 @@ class RiskMapPlanner:
         self._calls = 0
 
     @classmethod
-    def load(cls, checkpoint: str | Path, seed: int = 0) -> RiskMapPlanner:
+    def load(cls, checkpoint: str | Path, seed: int = 0,
+             goal_variance: float | None = None) -> RiskMapPlanner:
+        """Planning-time goal variance (cells²), first found of: `goal_variance`, the sidecar's
+        `planning.goal_variance`, the training value `irl.goal_variance`.
+
+        Why it may differ from training: the goal enters value iteration as −d²/(2σ²) against
+        per-cell rewards of about −1 to −2 on lanes, so the policy stops where one more cell
+        towards the goal gains less than a cell costs, (2d − 1)/(2σ²) < |r|. With σ² = 5 that is
+        ~8 cells (~38 m on highway) short of the goal, and a short plan means a slow ego. A
+        narrower goal at planning time moves the end onto the goal without retraining
+        (experiments/README.md, "Planning-time goal variance").
+        """
         from riskmap.checkpoint import load_model
 
         model, side = load_model(Path(checkpoint))
+        variance = goal_variance
+        if variance is None:
+            variance = side.get("planning", {}).get("goal_variance", side["irl"]["goal_variance"])
+        if variance <= 0:
+            raise InputError(f"goal variance must be > 0 cells², got {variance}")
         return cls(model, RasterConfig.from_dict(side["raster"]), GridConfig.from_dict(side["grid"]),
-                   side["irl"]["horizon"], side["irl"]["goal_variance"], side["irl"]["gamma"],
+                   side["irl"]["horizon"], variance, side["irl"]["gamma"],
                    SamplerConfig(**side["sampler"]), seed)
 
     def reset(self, scene: Scene) -> None:

@@ -18,8 +18,9 @@ class HumanDriver:
     name = "idm"
 
 
-def make_planner(spec: str, seed: int = 0):
-    """A `Planner` (or `HumanDriver`) for `spec`."""
+def make_planner(spec: str, seed: int = 0, goal_variance: float | None = None):
+    """A `Planner` (or `HumanDriver`) for `spec`; `goal_variance` (cells²) overrides a risk-map
+    checkpoint's planning-time goal variance."""
     kind, _, arg = spec.partition(":")
     if kind == "idm" and not arg:
         return HumanDriver()
@@ -30,5 +31,5 @@ def make_planner(spec: str, seed: int = 0):
     if kind == "riskmap" and arg:
         from riskmap.planner import RiskMapPlanner
 
-        return RiskMapPlanner.load(arg, seed=seed)
+        return RiskMapPlanner.load(arg, seed=seed, goal_variance=goal_variance)
     raise InputError(f"unknown planner spec {spec!r}; use one of {', '.join(SPECS)}")

@@ -52,3 +52,35 @@ def test_every_resolution_trains_a_step(tiny_dataset, tmp_path, resolution):
     best = train(tiny_train_config(tiny_dataset, tmp_path / "r", resolution=resolution, epochs=1,
                                    max_windows=4, val_ade_windows=1), progress=False)
     assert np.isfinite(best["val_nll"]) and np.isfinite(best["val_ade_m"])
+
+
+def test_planning_goal_variance_comes_from_argument_then_sidecar_then_training(tiny_checkpoint,
+                                                                               tmp_path):
+    import json
+    import shutil
+
+    trained = RiskMapPlanner.load(tiny_checkpoint)
+    assert trained.goal_variance == json.loads(
+        tiny_checkpoint.with_suffix(".json").read_text())["irl"]["goal_variance"]
+    assert RiskMapPlanner.load(tiny_checkpoint, goal_variance=0.7).goal_variance == 0.7
+    copy = tmp_path / "tuned"
+    shutil.copy(tiny_checkpoint.with_suffix(".safetensors"), copy.with_suffix(".safetensors"))
+    side = json.loads(tiny_checkpoint.with_suffix(".json").read_text())
+    side["planning"] = {"goal_variance": 1.5}
+    copy.with_suffix(".json").write_text(json.dumps(side))
+    assert RiskMapPlanner.load(copy).goal_variance == 1.5
+    assert RiskMapPlanner.load(copy, goal_variance=3.0).goal_variance == 3.0
+    with pytest.raises(InputError, match="goal variance"):
+        RiskMapPlanner.load(copy, goal_variance=0.0)
+
+
+def test_a_narrower_goal_ends_plans_nearer_the_goal(tiny_checkpoint):
+    from rasterize.frames import ego_from_grid
+
+    scene = DemoDataset(planner_data_dir(tiny_checkpoint)).scene(0)
+    errors = []
+    for variance in (50.0, 0.2):
+        plan = RiskMapPlanner.load(tiny_checkpoint, seed=3, goal_variance=variance).plan(scene)
+        grid = RiskMapPlanner.load(tiny_checkpoint).grid
+        errors.append(np.linalg.norm(plan.waypoints[-1] - ego_from_grid(plan.goal_cell, grid)))
+    assert errors[1] < errors[0]
