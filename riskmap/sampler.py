@@ -26,30 +26,33 @@ class SamplerConfig:
 
 def sample_paths(policy: torch.Tensor, start: tuple[int, int], horizon: int, samples: int,
                  generator: torch.Generator) -> tuple[torch.Tensor, torch.Tensor]:
-    """All `samples` paths in one vectorised pass: (cells [S, horizon + 1, 2], moves [S])."""
+    """All `samples` paths in one vectorised pass: (cells [S, horizon + 1, 2], moves [S]).
+
+    Inverse-CDF sampling with all uniforms drawn at once from `generator`: one comparison per
+    step instead of a multinomial call (the policy rows sum to 1; the last bin takes any rounding
+    remainder). The walk itself runs in numpy, whose per-call overhead on 1000-element arrays is
+    a fraction of torch's.
+    """
     _, h, w = policy.shape
-    moves = torch.tensor([MOVES[a] for a in range(END)], dtype=torch.long)
-    cells = torch.tensor(start, dtype=torch.long).repeat(samples, 1)
-    path = cells.new_empty((samples, horizon + 1, 2))
-    path[:, 0] = cells
-    alive = torch.ones(samples, dtype=torch.bool)
-    length = torch.zeros(samples, dtype=torch.long)
-    # Inverse-CDF sampling with all uniforms drawn at once: one comparison per step instead of a
-    # multinomial call (the policy rows sum to 1; the last bin takes any rounding remainder).
-    cdf = policy.permute(1, 2, 0).reshape(h * w, 5).double().cumsum(dim=1)
+    moves = np.array([MOVES[a] for a in range(END)] + [(0, 0)], dtype=np.int64)   # end: stay
+    cdf = policy.detach().cpu().permute(1, 2, 0).reshape(h * w, 5).double().cumsum(dim=1).numpy()
     cdf[:, -1] = 1.0
-    uniforms = torch.rand((horizon, samples, 1), generator=generator, dtype=torch.float64)
+    uniforms = torch.rand((horizon, samples, 1), generator=generator, dtype=torch.float64).numpy()
+    path = np.empty((samples, horizon + 1, 2), dtype=np.int64)
+    path[:, 0] = start
+    cells = path[:, 0].copy()
+    alive = np.ones(samples, dtype=bool)
+    length = np.zeros(samples, dtype=np.int64)
     for t in range(horizon):
-        action = (uniforms[t] >= cdf[cells[:, 0] * w + cells[:, 1]]).sum(dim=1).clamp(max=END)
+        action = np.minimum((uniforms[t] >= cdf[cells[:, 0] * w + cells[:, 1]]).sum(axis=1), END)
         alive &= action != END
-        step = moves[action.clamp(max=END - 1)] * alive.unsqueeze(1)
-        cells = cells + step
-        length += alive.long()
+        cells += moves[np.where(alive, action, END)]
+        length += alive
         path[:, t + 1] = cells
         if not alive.any():
-            path[:, t + 2:] = cells.unsqueeze(1)
+            path[:, t + 2:] = cells[:, None]
             break
-    return path, length
+    return torch.from_numpy(path), torch.from_numpy(length)
 
 
 def downsample(paths: np.ndarray, moves: np.ndarray, count: int, grid: GridConfig) -> np.ndarray:
@@ -64,8 +67,12 @@ def downsample(paths: np.ndarray, moves: np.ndarray, count: int, grid: GridConfi
     step[np.arange(step.shape[1])[None, :] >= moves[:, None]] = 0.0        # beyond the end
     cum = np.concatenate([np.zeros((len(step), 1)), np.cumsum(step, axis=1)], axis=1)
     targets = cum[:, -1:] * np.linspace(0.0, 1.0, count + 1)[None, 1:]     # [S, count]
-    # Index of the first cumulative length >= target, and the fraction within that move.
-    hi = np.minimum((cum[:, None, :] < targets[:, :, None] - 1e-9).sum(axis=2), cum.shape[1] - 1)
+    # Index of the first cumulative length >= target, and the fraction within that move: one
+    # searchsorted over all rows at once, each row lifted above the previous one by an offset.
+    n = cum.shape[1]
+    offset = (np.arange(len(cum)) * (cum[:, -1].max() + 1.0))[:, None]
+    below = np.searchsorted((cum + offset).ravel(), (targets - 1e-9 + offset).ravel(), side="left")
+    hi = np.minimum(below.reshape(targets.shape) - np.arange(len(cum))[:, None] * n, n - 1)
     lo = np.maximum(hi - 1, 0)
     c_lo, c_hi = np.take_along_axis(cum, lo, 1), np.take_along_axis(cum, hi, 1)
     frac = np.where(c_hi > c_lo, (targets - c_lo) / np.maximum(c_hi - c_lo, 1e-12), 0.0)
@@ -82,7 +89,8 @@ def sample_trajectory(policy: torch.Tensor, start: tuple[int, int], horizon: int
 
     generator = torch.Generator().manual_seed(seed)
     paths, lengths = sample_paths(policy.detach().cpu(), start, horizon, config.samples, generator)
-    paths, lengths = paths.numpy(), lengths.numpy()
+    # Columns after the longest path only repeat its end: drop them before measuring lengths.
+    paths, lengths = paths[:, :int(lengths.max()) + 1].numpy(), lengths.numpy()
     # Represent each path by its own evenly spaced waypoints, then cluster those.
     feats = downsample(paths, lengths, config.waypoints, grid)
     flat = feats.reshape(len(feats), -1)

@@ -26,17 +26,6 @@ def neg_value(dtype: torch.dtype) -> float:
     return -1e30 if dtype in (torch.float32, torch.float64) else -1e4
 
 
-def _shifted_values(value: torch.Tensor, neg: float) -> torch.Tensor:
-    """[B, 4, H, W]: V at the cell each move leads to, NEG where the move leaves the grid."""
-    b, h, w = value.shape
-    out = value.new_full((b, 4, h, w), neg)
-    out[:, UP, 1:, :] = value[:, :-1, :]
-    out[:, DOWN, :-1, :] = value[:, 1:, :]
-    out[:, LEFT, :, 1:] = value[:, :, :-1]
-    out[:, RIGHT, :, :-1] = value[:, :, 1:]
-    return out
-
-
 def _check(reward: torch.Tensor, goal: torch.Tensor, horizon: int) -> None:
     if reward.ndim != 3 or goal.shape != reward.shape:
         raise ValueError(f"reward and goal must both be [B, H, W]; got {tuple(reward.shape)} and "
@@ -49,15 +38,33 @@ def _check(reward: torch.Tensor, goal: torch.Tensor, horizon: int) -> None:
 
 def soft_value_iteration(reward: torch.Tensor, goal: torch.Tensor, horizon: int,
                          gamma: float = 1.0) -> tuple[torch.Tensor, torch.Tensor]:
-    """(value [B, H, W], policy [B, 5, H, W]) after `horizon` soft Bellman backups."""
+    """(value [B, H, W], policy [B, 5, H, W]) after `horizon` soft Bellman backups.
+
+    One Q buffer [B, 5, H, W] is filled once with what never changes (the `end` column and the
+    moves that leave the grid) and then only its in-grid move entries are rewritten each backup,
+    in place, without per-step allocations.
+    """
     _check(reward, goal, horizon)
     neg = neg_value(reward.dtype)
-    q_end = reward + gamma * goal
+    b, h, w = reward.shape
+    q = (reward + gamma * neg).clamp(neg, -neg).unsqueeze(1).repeat(1, 5, 1, 1)
+    q[:, END] = (reward + gamma * goal).clamp(neg, -neg)
+    # (Q view, reward view, source slice of V) of each move whose target is inside the grid.
+    targets = (
+        (q[:, UP, 1:, :], reward[:, 1:, :], (slice(None), slice(None, -1), slice(None))),
+        (q[:, DOWN, :-1, :], reward[:, :-1, :], (slice(None), slice(1, None), slice(None))),
+        (q[:, LEFT, :, 1:], reward[:, :, 1:], (slice(None), slice(None), slice(None, -1))),
+        (q[:, RIGHT, :, :-1], reward[:, :, :-1], (slice(None), slice(None), slice(1, None))),
+    )
     value = reward.new_full(reward.shape, neg)
-    q = None
+    moves = q[:, :END]
     for _ in range(horizon):
-        q_moves = reward.unsqueeze(1) + gamma * _shifted_values(value, neg)
-        q = torch.cat([q_moves, q_end.unsqueeze(1)], dim=1).clamp(neg, -neg)
+        for q_view, r_view, source in targets:
+            if gamma == 1.0:
+                torch.add(r_view, value[source], out=q_view)
+            else:
+                torch.add(r_view, value[source], alpha=gamma, out=q_view)
+        moves.clamp_(neg, -neg)
         value = torch.logsumexp(q, dim=1)
     policy = torch.exp(q - value.unsqueeze(1))
     return value, policy
