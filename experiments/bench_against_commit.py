@@ -1,4 +1,4 @@
-"""Value iteration and sampler of this tree against those of an earlier commit, in one process.
+"""Value iteration, state visitation and sampler of this tree against those of an earlier commit, in one process.
 
 Loads `riskmap/vi.py` and `riskmap/sampler.py` as they were at `--commit` (git show) next to the
 current ones, checks that both give bitwise-equal results on the same inputs, and times them
@@ -78,6 +78,17 @@ def main() -> None:
             t_then.append(timed(vi_then.soft_value_iteration, reward, goal, horizon))
             t_now.append(timed(vi_now.soft_value_iteration, reward, goal, horizon))
         rows.append({"stage": "vi", "resolution": g, "bitwise_equal": equal,
+                     "then_ms": 1000 * statistics.median(t_then),
+                     "now_ms": 1000 * statistics.median(t_now)})
+        policy, start = now[1], torch.tensor([[g - 5, g // 2]])
+        then, now = vi_then.state_visitation(policy, start, horizon), \
+            vi_now.state_visitation(policy, start, horizon)
+        equal = all(torch.equal(a, b) for a, b in zip(then, now, strict=True))
+        t_then, t_now = [], []
+        for _ in range(args.repeats):
+            t_then.append(timed(vi_then.state_visitation, policy, start, horizon))
+            t_now.append(timed(vi_now.state_visitation, policy, start, horizon))
+        rows.append({"stage": "svf", "resolution": g, "bitwise_equal": equal,
                      "then_ms": 1000 * statistics.median(t_then),
                      "now_ms": 1000 * statistics.median(t_now)})
     planner = RiskMapPlanner.load(args.checkpoint)

@@ -88,14 +88,17 @@ def state_visitation(policy: torch.Tensor, start_cells: torch.Tensor, horizon: i
     mass[torch.arange(b), start_cells[:, 0], start_cells[:, 1]] = 1.0
     svf_path = torch.zeros_like(mass)
     svf_goal = torch.zeros_like(mass)
+    flow = policy.new_empty((b, END, h, w))
+    moving = policy[:, :END]
+    nxt = torch.empty_like(mass)
     for _ in range(horizon):
-        svf_path = svf_path + mass
-        svf_goal = svf_goal + mass * policy[:, END]
-        flow = mass.unsqueeze(1) * policy[:, :END]
-        nxt = torch.zeros_like(mass)
+        svf_path += mass
+        svf_goal += mass * policy[:, END]
+        torch.mul(moving, mass.unsqueeze(1), out=flow)
+        nxt.zero_()
         nxt[:, :-1, :] += flow[:, UP, 1:, :]
         nxt[:, 1:, :] += flow[:, DOWN, :-1, :]
         nxt[:, :, :-1] += flow[:, LEFT, :, 1:]
         nxt[:, :, 1:] += flow[:, RIGHT, :, :-1]
-        mass = nxt
+        mass, nxt = nxt, mass
     return svf_path, svf_goal
