@@ -8,6 +8,9 @@ An attack perturbs one closed-loop episode (riskmap.drive.drive_episode) through
 
 and tells the campaign which vehicle it made the adversary (`adversary`, a highway-env vehicle,
 or None when the attack has no single adversary). `run` is a `riskmap.episode.Episode`.
+An attack may also define `extra() -> dict` (JSON-ready) to put its own numbers in the record
+as `attack_extra`; the report reads `generations` ([{"evaluations": n, "collisions": k}, ...]),
+`pareto_front` ([[f1, f2, ...], ...]) and `objective_names` from search attacks.
 
 Each attack is registered under a name with a frozen params dataclass (validated when the
 campaign config is read) and a category, which decides where the report shows it:

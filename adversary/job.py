@@ -167,8 +167,8 @@ def _drive(job: Job) -> tuple[dict, bytes]:
     recording = None if isinstance(planner, HumanDriver) else RecordingPlanner(planner)
     attack_seed = int(np.random.SeedSequence([job.planner_seed, job.scene_seed, job.episode])
                       .generate_state(1)[0])
-    monitor = EpisodeMonitor(make_attack(job.attack_name, job.attack_params, attack_seed), job.safety,
-                             job.budget.control_hz)
+    attack = make_attack(job.attack_name, job.attack_params, attack_seed)
+    monitor = EpisodeMonitor(attack, job.safety, job.budget.control_hz)
     episode = drive_episode(env, recording or planner, config,
                             job.episode, observer=monitor)
     solution = None
@@ -187,6 +187,8 @@ def _drive(job: Job) -> tuple[dict, bytes]:
         "simulated_s": episode["simulated_s"],
         "env_seed": episode["env_seed"],
         "plan_calls": episode["plan_calls"],
+        # Optional, attack-specific numbers (e.g. a search's generations and Pareto front).
+        "attack_extra": attack.extra() if hasattr(attack, "extra") else {},
         "timing": {"plan_ms_median": episode["plan_ms_median"]},
     }
     return record, _artifact(monitor, recording, job.env_id)
