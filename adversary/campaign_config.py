@@ -18,7 +18,7 @@ Every job is (planner, scenario family episode, attack); `jobs()` lists them in 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import yaml
@@ -63,9 +63,9 @@ class CampaignConfig:
     scenarios: tuple[ScenarioFamily, ...]
     attacks: tuple[AttackConfig, ...]
     seed: int = 0
-    budget: Budget = Budget()
-    safety: SafetyConfig = SafetyConfig()
-    report: ReportConfig = ReportConfig()
+    budget: Budget = field(default_factory=Budget)
+    safety: SafetyConfig = field(default_factory=SafetyConfig)
+    report: ReportConfig = field(default_factory=ReportConfig)
 
     def attack_params(self) -> dict[str, tuple[str, object]]:
         """label -> (attack name, validated params dataclass)."""

@@ -94,7 +94,8 @@ def gallery_figures(artifact: Path, env_id: str, out_dir: Path, stem: str, title
     fig, axes = plt.subplots(1, 4, figsize=(17, 4.3), dpi=90)
     plan = data.get("plan", {})
     scene = data.get("plan_scene", final)
-    _bev(axes[0], scene, raster, f"BEV at the last plan (t = {scene.time_s:.1f} s)")
+    when = "at the last plan" if "plan_scene" in data else "at the end (no plans: the ego drove itself)"
+    _bev(axes[0], scene, raster, f"BEV {when}, t = {scene.time_s:.1f} s")
     if "waypoints" in plan:
         wp = np.concatenate([[[0.0, 0.0]], plan["waypoints"]])
         axes[0].plot(wp[:, 1], wp[:, 0], "-o", color="#ff66ff", ms=2.5, lw=1.3, label="plan 6 s")
@@ -112,7 +113,7 @@ def gallery_figures(artifact: Path, env_id: str, out_dir: Path, stem: str, title
 
     fig, axes = plt.subplots(1, len(STRIP_SECONDS_BEFORE_END), figsize=(12, 3.9), dpi=80)
     for ax, before in zip(axes, STRIP_SECONDS_BEFORE_END):
-        index = final.current_index - int(round(before / final.dt))
+        index = final.current_index - round(before / final.dt)
         if index < 0 or not final.valid[final.ego_index, index]:
             ax.axis("off")
             ax.set_title(f"t_end - {before:.0f} s: not recorded", fontsize=9)

@@ -13,7 +13,7 @@ from importlib import metadata
 from pathlib import Path
 
 from adversary.attacks import attack_entry
-from adversary.report_figures import collision_types_figure, metrics_figure, search_figure
+from adversary.report_figures import collision_types_figure, metrics_figure, search_figure, short_spec
 from adversary.report_numbers import COLLISION_TYPES, report_numbers
 from adversary.store import ResultStore
 from rasterize.errors import InputError
@@ -92,7 +92,7 @@ def make_report(campaign_dir: Path, out_dir: Path | None = None) -> dict:
             continue
         what = (f"collision ({worst['collision_type']}, {worst['kinematic_mps']:.1f} m/s)"
                 if worst["collided"] else f"no collision, Safety {worst['safety_pct']:.0f}%")
-        title = (f"#{rank + 1} {worst['planner']} | {worst['env_id']} seed {worst['scene_seed']} "
+        title = (f"#{rank + 1} {short_spec(worst['planner'])} | {worst['env_id']} seed {worst['scene_seed']} "
                  f"episode {worst['episode']} | {worst['attack']}: {what}")
         panel, strip = gallery_figures(artifact, worst["env_id"], figures, f"worst_{rank + 1}", title)
         gallery.append({**worst, "title": title, "panel": f"figures/{panel}", "strip": f"figures/{strip}"})

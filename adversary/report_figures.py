@@ -18,6 +18,12 @@ def _plt():
     return plt
 
 
+def short_spec(spec: str) -> str:
+    """A planner SPEC short enough for a figure label: `riskmap:a/b/ckpt` -> `riskmap:ckpt`."""
+    kind, sep, arg = spec.partition(":")
+    return f"{kind}:{Path(arg).name}" if sep and "/" in arg else spec
+
+
 def _save(fig, path: Path) -> str:
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -48,7 +54,7 @@ def metrics_figure(rows: list[dict], path: Path) -> str:
                 ys.append(stat["value"] * scale)
                 lo.append((stat["value"] - stat["lo"]) * scale)
                 hi.append((stat["hi"] - stat["value"]) * scale)
-            ax.bar(xs, ys, width, yerr=[lo, hi], capsize=3, color=colours(j), label=planner)
+            ax.bar(xs, ys, width, yerr=[lo, hi], capsize=3, color=colours(j), label=short_spec(planner))
         ax.set_xticks(range(len(attacks)), attacks, rotation=15, fontsize=8)
         ax.set_title(title, fontsize=10)
         ax.grid(axis="y", alpha=0.3)
@@ -59,7 +65,7 @@ def metrics_figure(rows: list[dict], path: Path) -> str:
 
 def collision_types_figure(rows: list[dict], path: Path) -> str:
     plt = _plt()
-    labels = [f"{r['planner']}\n{r['attack']}" for r in rows]
+    labels = [f"{short_spec(r['planner'])}\n{r['attack']}" for r in rows]
     fig, ax = plt.subplots(figsize=(max(5.0, 1.3 * len(rows) + 2), 3.6), dpi=100)
     bottom = np.zeros(len(rows))
     colours = plt.get_cmap("Set2")
@@ -67,8 +73,11 @@ def collision_types_figure(rows: list[dict], path: Path) -> str:
         counts = np.array([r[kind] for r in rows], dtype=float)
         ax.bar(range(len(rows)), counts, 0.6, bottom=bottom, label=kind, color=colours(k))
         bottom += counts
-    ax.set_xticks(range(len(rows)), labels, fontsize=7)
+    ax.set_xticks(range(len(rows)), labels, fontsize=7, rotation=20, ha="right")
     ax.set_ylabel("collisions")
+    from matplotlib.ticker import MaxNLocator
+
+    ax.yaxis.set_major_locator(MaxNLocator(integer=True))
     ax.set_title("collision types (relative heading and position of the partner)", fontsize=10)
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))
     ax.grid(axis="y", alpha=0.3)
@@ -80,7 +89,7 @@ def search_figure(history: list[dict], path: Path) -> str:
     plt = _plt()
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), dpi=100)
     for h in history:
-        label = f"{h['planner']} / {h['attack']}"
+        label = f"{short_spec(h['planner'])} / {h['attack']}"
         if h["generations"]:
             axes[0].plot([g.get("collisions", 0) for g in h["generations"]], "-o", ms=3, label=label)
         front = np.asarray(h["pareto_front"], dtype=float)

@@ -46,8 +46,8 @@ def predict_positions(road, vehicles: list, horizon_s: float, step_s: float, sim
     twin = copy.deepcopy(road)
     index = {id(v): i for i, v in enumerate(road.vehicles)}
     twins = [twin.vehicles[index[id(v)]] for v in vehicles]
-    sub_steps = int(round(step_s / sim_dt_s))
-    out = np.zeros((len(vehicles), int(round(horizon_s / step_s)), 2))
+    sub_steps = round(step_s / sim_dt_s)
+    out = np.zeros((len(vehicles), round(horizon_s / step_s), 2))
     for t in range(out.shape[1]):
         for _ in range(sub_steps):
             twin.act()

@@ -43,7 +43,7 @@ def ego_only_solution(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, 
     states [A, S, 6] world frame (x, y, cos, sin, speed, yaw rate), valid [A, S], sizes [A, 2]
     (length, width): a TrafficRecorder's arrays; `collision_step` indexes S.
     """
-    start = max(0, collision_step - int(round(lookback_s / dt_s)))
+    start = max(0, collision_step - round(lookback_s / dt_s))
     path = states[ego, start:collision_step + 1, :2][valid[ego, start:collision_step + 1]]
     v0 = float(states[ego, start, 4])
     others = [a for a in range(states.shape[0]) if a != ego and valid[a, start:collision_step + 1].any()

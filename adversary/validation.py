@@ -19,18 +19,15 @@ _SCALARS = {"bool": bool, "int": int, "float": float, "str": str}
 
 def _scalar(value: Any, type_name: str, where: str):
     """Coerce `value` to the scalar type named `type_name` (int is accepted for float)."""
-    if type_name == "bool":
-        if isinstance(value, bool):
-            return value
-    elif type_name == "int":
-        if isinstance(value, int) and not isinstance(value, bool):
-            return value
-    elif type_name == "float":
-        if isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value):
-            return float(value)
-    elif type_name == "str":
-        if isinstance(value, str) and value:
-            return value
+    number = isinstance(value, (int, float)) and not isinstance(value, bool)
+    if type_name == "bool" and isinstance(value, bool):
+        return value
+    if type_name == "int" and number and isinstance(value, int):
+        return value
+    if type_name == "float" and number and math.isfinite(value):
+        return float(value)
+    if type_name == "str" and isinstance(value, str) and value:
+        return value
     raise InputError(f"{where}: expected {'a non-empty string' if type_name == 'str' else type_name}, "
                      f"got {value!r}")
 

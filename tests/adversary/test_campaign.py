@@ -89,7 +89,7 @@ def test_a_failing_job_is_recorded_and_the_campaign_goes_on(tmp_path):
 
 
 def test_report_page_has_every_image_and_only_filled_tables(tiny_campaign, tmp_path):
-    report = make_report(tiny_campaign, tmp_path / "report")
+    make_report(tiny_campaign, tmp_path / "report")
     page = tmp_path / "report" / "report.html"
     assert report_problems(page) == []
     summary = page_summary(page)
@@ -114,3 +114,17 @@ def test_cli_prints_one_line_errors(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert err.startswith("adversary stress-test: error: unknown attack 'nope'") and "\n" not in err
     assert main(["report", str(tmp_path / "nothing")]) == 2
+
+
+def test_job_results_do_not_depend_on_what_ran_before_in_the_process():
+    from adversary.job import run_job
+
+    config = tiny_config(planners=["idm"], scenarios=[{"env": "highway-v0", "episodes": 1},
+                                                      {"env": "intersection-v0", "episodes": 1}],
+                         attacks=[{"name": "natural"}], budget={"episode_s": 2.0})
+    highway, intersection = config.jobs()
+    first = run_job(highway)["record"]
+    run_job(intersection)             # highway-env's intersection env edits IDMVehicle's class
+    again = run_job(highway)["record"]
+    first.pop("timing"), again.pop("timing")
+    assert first == again
