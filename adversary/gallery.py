@@ -36,7 +36,10 @@ def _bev(ax, scene, raster, title: str) -> None:
     ext = raster.extent
     ax.imshow(raster_to_rgb(rasterize_scene(scene, raster)), interpolation="nearest", aspect="auto",
               extent=(ext.left_m, -ext.right_m, -ext.back_m, ext.front_m))
-    ax.set_title(title, fontsize=9)
+    stretch = (ext.length_m / raster.rows) / (ext.width_m / raster.cols)
+    # Highway rasters squeeze 240 m x 40 m into a square: small heading changes look steep.
+    note = f"\n[lateral axis stretched x{stretch:.0f}]" if stretch > 1.5 else ""
+    ax.set_title(title + note, fontsize=9)
     ax.set_xlabel("lateral y (m)", fontsize=8)
 
 
