@@ -3,13 +3,16 @@
 `local` runs `adversary.job.run_job` in a process pool (or inline for one worker); `ray` runs the
 very same function as Ray tasks on a cluster (`address`) or a local Ray instance. Both yield
 (job, result) pairs in completion order; the campaign writes each result as it arrives.
+A job's own errors become error records inside run_job. A Ray worker that dies under a job fails
+only that job; a local pool worker that dies breaks the pool (concurrent.futures' design), so
+the campaign stops there and `--resume` continues with the unfinished jobs.
 """
 
 from __future__ import annotations
 
 from collections.abc import Iterator
 
-from adversary.job import Job, run_job
+from adversary.job import Job, error_result, run_job
 from rasterize.errors import InputError
 
 BACKENDS = ("local", "ray")
@@ -57,7 +60,14 @@ def run_ray(jobs: list[Job], workers: int, address: str | None) -> Iterator[tupl
         while pending:
             done, _ = ray.wait(list(pending), num_returns=1)
             for ref in done:
-                yield pending.pop(ref), ray.get(ref)
+                job = pending.pop(ref)
+                try:
+                    result = ray.get(ref)
+                except ray.exceptions.RayError as error:
+                    # run_job never raises: this is the worker dying under the job (a crash, the
+                    # memory monitor). Record it against this job; the other tasks go on.
+                    result = error_result(job, error)
+                yield job, result
     finally:
         for ref in pending:
             ray.cancel(ref)

@@ -203,6 +203,14 @@ def _drive(job: Job) -> tuple[dict, bytes]:
     return record, _artifact(monitor, recording, job.env_id)
 
 
+def error_result(job: Job, error: BaseException, trace: str = "") -> dict:
+    """The result of a job that failed: its record carries the error's first line."""
+    record = {**job.describe(), "status": "error",
+              "error": (f"{type(error).__name__}: {error}".splitlines() or [""])[0][:500],
+              "traceback": trace[-2000:], "timing": {}}
+    return {"record": record, "artifact": None}
+
+
 def run_job(job: Job) -> dict:
     """{"record": dict, "artifact": npz bytes or None}; a failure is a record, never a raise."""
     started = time.perf_counter()
@@ -211,11 +219,9 @@ def run_job(job: Job) -> dict:
 
         torch.set_num_threads(1)
         record, artifact = _drive(job)
-        record = {**job.describe(), "status": "ok", "error": None, **record}
+        result = {"record": {**job.describe(), "status": "ok", "error": None, **record},
+                  "artifact": artifact}
     except Exception as error:  # noqa: BLE001  (a failing job is recorded and the campaign goes on)
-        record = {**job.describe(), "status": "error",
-                  "error": f"{type(error).__name__}: {error}".splitlines()[0][:500],
-                  "traceback": traceback.format_exc(limit=4)[-2000:], "timing": {}}
-        artifact = None
-    record["timing"]["wall_s"] = time.perf_counter() - started
-    return {"record": record, "artifact": artifact}
+        result = error_result(job, error, traceback.format_exc(limit=4))
+    result["record"]["timing"]["wall_s"] = time.perf_counter() - started
+    return result
