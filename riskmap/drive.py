@@ -56,9 +56,14 @@ def _min_gap(road, ego, radius: float) -> float:
     return min(gaps, default=float("inf"))
 
 
-def drive_episode(env, planner, config: DriveConfig, episode: int, frames_dir: Path | None = None
-                  ) -> dict:
+def drive_episode(env, planner, config: DriveConfig, episode: int, frames_dir: Path | None = None,
+                  observer=None) -> dict:
+    """Drive one episode. `observer` (optional) gets `start(run)` once the episode is reset, before
+    the ego is handed to the planner, and `step(run)` after every simulation step: the hook through
+    which a scenario is perturbed and extra metrics are measured."""
     run = Episode(env, config.env_id, config.seed, episode, config.control_hz)
+    if observer is not None:
+        observer.start(run)
     human = isinstance(planner, HumanDriver)
     controller = TrackingController(ControllerConfig())
     plan_times, gaps, speeds = [], [], []
@@ -94,6 +99,8 @@ def drive_episode(env, planner, config: DriveConfig, episode: int, frames_dir: P
             since_plan += run.dt
         before = ego.position.copy()
         run.step()
+        if observer is not None:
+            observer.step(run)
         distance += float(np.linalg.norm(run.ego.position - before))
         speeds.append(float(run.ego.speed))
         gaps.append(_min_gap(run.base.road, run.ego, config.gap_radius_m))

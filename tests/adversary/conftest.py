@@ -1,0 +1,27 @@
+from pathlib import Path
+
+import pytest
+
+from adversary.campaign import RunOptions, run_campaign
+from adversary.campaign_config import campaign_from_dict
+
+TINY = {
+    "name": "tiny", "seed": 0, "planners": ["cv", "idm"],
+    "scenarios": [{"env": "highway-v0", "seed": 0, "episodes": 1},
+                  {"env": "highway-v0", "seed": 1, "episodes": 1}],
+    "attacks": [{"name": "natural"}, {"name": "aggressive_neighbour", "params": {"selection": "nearest"}}],
+    "budget": {"episode_s": 3.0},
+    "report": {"gallery": 2},
+}
+
+
+def tiny_config(**changes):
+    return campaign_from_dict({**TINY, **changes})
+
+
+@pytest.fixture(scope="session")
+def tiny_campaign(tmp_path_factory) -> Path:
+    """The tiny campaign (2 planners x 2 scenes x 2 attacks = 8 jobs) run uninterrupted, inline."""
+    out = tmp_path_factory.mktemp("campaign") / "full"
+    run_campaign(tiny_config(), out, RunOptions(progress=False))
+    return out
