@@ -23,7 +23,7 @@ reads simulated ones. NGSIM speeds (mostly below 15 m/s) keep the 6 s future wel
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -48,7 +48,7 @@ class CommonRoadSceneConfig:
     lane_radius_m: float = 260.0      # lanelets whose centre line comes this close are kept
     # The route rule's speed limit when the file gives none: 65 mph, the US-101 / I-80 limit.
     speed_limit_mps: float = 29.06
-    route_rule: RouteRule = RouteRule()
+    route_rule: RouteRule = field(default_factory=RouteRule)
 
     def __post_init__(self) -> None:
         for name in ("history_s", "future_s"):
@@ -62,11 +62,11 @@ class CommonRoadSceneConfig:
 
     @property
     def history_steps(self) -> int:
-        return int(round(self.history_s / self.dt_s))
+        return round(self.history_s / self.dt_s)
 
     @property
     def future_steps(self) -> int:
-        return int(round(self.future_s / self.dt_s))
+        return round(self.future_s / self.dt_s)
 
 
 def load_scenario(path: str | Path):
@@ -274,7 +274,7 @@ class RecordedTraffic:
         first, last = self.span(agent)
         hist = config.history_s / self.dt_s
         fut = config.future_s / self.dt_s
-        stride = max(1, int(round(stride_s / self.dt_s)))
+        stride = max(1, round(stride_s / self.dt_s))
         start = first + int(np.ceil(hist - 1e-9))
         return list(range(start, int(np.floor(last - fut + 1e-9)) + 1, stride))
 
@@ -354,7 +354,7 @@ def _centre_line_ahead(network, state: np.ndarray, length_m: float) -> np.ndarra
 
 
 def route_on_lanelets(network, ego_state: np.ndarray, ego_length_m: float, others: np.ndarray,
-                      other_lengths_m: np.ndarray, rule: RouteRule = RouteRule(),
+                      other_lengths_m: np.ndarray, rule: RouteRule | None = None,
                       speed_limit_mps: float = 29.06) -> np.ndarray:
     """[rule.points, 2] world points from the ego along its lane to its goal (the route rule).
 
@@ -362,6 +362,7 @@ def route_on_lanelets(network, ego_state: np.ndarray, ego_length_m: float, other
     route caps it at the leader's position after T less a standstill gap and a time headway.
     Off the lanelets the route runs straight ahead along the ego's heading.
     """
+    rule = rule or RouteRule()
     t = rule.horizon_s
     speed = max(float(ego_state[4]), 0.0)
     free = min(speed_limit_mps * t, speed * t + 0.5 * rule.accel_mps2 * t * t)
