@@ -30,7 +30,9 @@ from torch.utils.data import DataLoader, Subset
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from eval_plans import window_errors
 
+from rasterize.frames import ego_from_world, ego_pose
 from riskmap.atomic import write_json
+from riskmap.baselines import ConstantVelocityPlanner
 from riskmap.checkpoint import load_model, save_checkpoint
 from riskmap.data import DemoDataset, PerturbedEgo
 from riskmap.irl import IRLConfig, irl_step
@@ -68,7 +70,21 @@ def _errors(checkpoint: Path, dataset: DemoDataset, indices: list[int], side: di
         planner = RiskMapPlanner.load(checkpoint, seed=seed)
         runs.append(window_errors(planner, dataset, indices, side["maps"]["sigma_x"],
                                   side["maps"]["sigma_y"]))
-    return {k: np.mean([r[k] for r in runs], axis=0) for k in ("ade_m", "fde_m", "goal_error_m")}
+    keys = ("ade_m", "fde_m", "goal_error_m", "plan_end_m", "demo_end_m")
+    return {k: np.mean([r[k] for r in runs], axis=0) for k in keys}
+
+
+def _constant_velocity_errors(dataset: DemoDataset) -> dict[str, np.ndarray]:
+    """ADE / FDE of the `cv` baseline (current speed and heading for 6 s) on every window."""
+    planner = ConstantVelocityPlanner()
+    ade, fde = [], []
+    for i in range(len(dataset)):
+        scene = dataset.scene(i)
+        demo = ego_from_world(scene.ego_future_xy(), *ego_pose(scene))
+        err = np.linalg.norm(planner.plan(scene).waypoints - demo, axis=1)
+        ade.append(err.mean())
+        fde.append(err[-1])
+    return {"ade_m": np.array(ade), "fde_m": np.array(fde)}
 
 
 def fine_tune(args: FineTuneArgs, dataset: DemoDataset, train_idx: list[int], out: Path) -> Path:
@@ -148,8 +164,9 @@ def main() -> None:
         vehicles.append({"episode": ep, "windows": len(idx),
                          **{f"before_{k}": float(np.mean(before[k][idx])) for k in before},
                          **{f"after_{k}": float(np.mean(after[k][idx])) for k in after}})
+    cv = _constant_velocity_errors(dataset)
     result = {"args": asdict(args), "windows": len(dataset), "demonstrators": len(vehicles),
-              "before": summary(before), "after_held_out": summary(after),
+              "constant_velocity": summary(cv), "before": summary(before), "after_held_out": summary(after),
               "after_on_training_windows": summary(after_train), "folds": fold_info,
               "per_vehicle": vehicles}
     out = Path(args.out)
@@ -157,9 +174,13 @@ def main() -> None:
     rows = [("shipped highway planner", summary(before)), ("fine-tuned, held-out vehicles",
                                                          summary(after)),
             ("fine-tuned, its own training vehicles", summary(after_train))]
-    table = ["| model | ADE (m) | FDE (m) | plan end to goal (m) |", "|---|---|---|---|"]
+    table = ["| model | ADE (m) | FDE (m) | plan end to goal (m) | plan length (m) |",
+             "|---|---|---|---|---|"]
     table += [f"| {name} | {s['ade_m']['mean']:.2f} | {s['fde_m']['mean']:.2f} | "
-              f"{s['goal_error_m']['mean']:.2f} |" for name, s in rows]
+              f"{s['goal_error_m']['mean']:.2f} | {s['plan_end_m']['mean']:.1f} |" for name, s in rows]
+    table.append(f"| constant velocity (reference) | {np.mean(cv['ade_m']):.2f} | "
+                 f"{np.mean(cv['fde_m']):.2f} | – | – |")
+    table.append(f"| (recorded human's 6 s displacement) | | | | {np.mean(before['demo_end_m']):.1f} |")
     (out / "finetune.md").write_text("\n".join(table) + "\n")
     print("\n".join(table))
 

@@ -28,7 +28,8 @@ from riskmap.planner import RiskMapPlanner
 def window_errors(planner: RiskMapPlanner, dataset: DemoDataset, indices, sigma_x: float,
                   sigma_y: float) -> dict[str, list[float]]:
     """Per-window ADE, FDE, goal error, SVF overlap and planning time of `planner` on `indices`."""
-    out = {"index": [], "ade_m": [], "fde_m": [], "goal_error_m": [], "overlap": [], "plan_ms": []}
+    out = {"index": [], "ade_m": [], "fde_m": [], "goal_error_m": [], "overlap": [], "plan_ms": [],
+           "plan_end_m": [], "demo_end_m": []}
     for i in indices:
         scene = dataset.scene(int(i))
         plan = planner.plan(scene)
@@ -43,6 +44,8 @@ def window_errors(planner: RiskMapPlanner, dataset: DemoDataset, indices, sigma_
             plan.waypoints[-1] - ego_from_grid(plan.goal_cell, planner.grid))))
         out["overlap"].append(float((plan.svf * unc).sum() / max(plan.svf.sum(), 1e-9)))
         out["plan_ms"].append(1000 * plan.timings_s["total"])
+        out["plan_end_m"].append(float(np.linalg.norm(plan.waypoints[-1])))   # how far it goes
+        out["demo_end_m"].append(float(np.linalg.norm(demo[-1])))
     return out
 
 

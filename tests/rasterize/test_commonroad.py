@@ -208,3 +208,14 @@ def test_unreadable_file_is_an_input_error(tmp_path):
     with pytest.raises(InputError, match="could not be read") as err:
         load_scenario(bad)
     assert "\n" not in str(err.value)
+
+
+def test_recorded_vehicles_drive_inside_the_lanes(traffic):
+    from matplotlib.path import Path as Polygon
+
+    scene = scene_from_commonroad(traffic, 400, 20)
+    polygons = [Polygon(lane.polygon()) for lane in scene.lanes]
+    now = scene.current_index
+    present = np.flatnonzero(scene.valid[:, now])
+    inside = [any(p.contains_point(scene.states[a, now, :2]) for p in polygons) for a in present]
+    assert len(present) == 18 and all(inside)
