@@ -72,8 +72,9 @@ def main() -> None:
 
     result = {spec: {"summary": summary(rs), "episodes": rs} for spec, rs in records.items()}
     write_json(args.out / "replay.json", result)
-    table = [("| planner | episodes | Safety % | collisions (struck from behind) | off-road | ADE (m) | goal error (m) | "
-             "driven (m) | human (m) | mean length (s) |"), "|---|---|---|---|---|---|---|---|---|---|"]
+    table = [("| planner | episodes | Safety % | collisions (struck from behind) | off-road | ADE (m) | "
+              "goal error (m) | driven (m) | human (m) | mean length (s) |"),
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for spec, r in result.items():
         s = r["summary"]
         table.append(f"| {spec} | {s['episodes']} | {s['safety_pct']:.0f} | {s['collisions']} "

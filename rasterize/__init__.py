@@ -31,7 +31,8 @@ def __getattr__(name):
 
         return getattr(highway, name)
     if name in ("scene_from_commonroad", "RecordedTraffic"):
-        from rasterize import commonroad   # needs the optional commonroad-io package
+        # Reading CommonRoad files needs the optional commonroad-io package.
+        from rasterize import commonroad
 
         return getattr(commonroad, name)
     raise AttributeError(name)

@@ -21,6 +21,8 @@ def _positive_int(text: str) -> int:
 
 def _cmd_collect(args: argparse.Namespace) -> int:
     if args.from_commonroad:
+        if args.env is not None or args.episodes is not None:
+            raise InputError("pass either --from-commonroad FILES or --env ENV --episodes N, not both")
         return _cmd_collect_commonroad(args)
     if args.env is None or args.episodes is None:
         raise InputError("collect needs --env ENV and --episodes N (or --from-commonroad FILES)")

@@ -93,3 +93,9 @@ def test_bad_input_is_one_line_and_leaves_nothing(tmp_path, inputs, words):
 def test_collect_without_a_source_names_the_fix(tmp_path, capsys):
     assert main(["collect", "--out", str(tmp_path / "x")]) == 2
     assert "--env ENV and --episodes N" in capsys.readouterr().err
+
+
+def test_recorded_and_simulated_sources_do_not_mix(tmp_path, capsys):
+    assert main(["collect", "--from-commonroad", str(FIXTURES), "--env", "highway-v0",
+                 "--out", str(tmp_path / "x")]) == 2
+    assert "not both" in capsys.readouterr().err and not (tmp_path / "x").exists()
