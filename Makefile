@@ -18,7 +18,8 @@ $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet $(TORCH_PIN)
-	$(BIN)/python -m pip install --quiet -e '.[dev]'
+	$(BIN)/python -m pip install --quiet -e '.[dev,commonroad]'
+	$(BIN)/python -m pip install --quiet --no-deps 'commonroad-io==2026.1'   # see pyproject.toml
 	touch $(STAMP)
 
 test: $(STAMP)

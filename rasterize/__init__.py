@@ -20,7 +20,7 @@ __all__ = [
     "AgentKind", "CHANNELS", "ENV_FAMILIES", "Extent", "FAMILY_EXTENTS", "GridConfig",
     "InputError", "Lane", "LineType", "RasterConfig", "Scene", "demo_goal_cell",
     "demo_visitation", "family_of_env", "goal_map", "motion_features", "raster_config_for_env",
-    "rasterize_scene", "scene_from_highway_env", "start_cell", "uncertainty_map",
+    "rasterize_scene", "scene_from_commonroad", "scene_from_highway_env", "start_cell", "uncertainty_map",
 ]
 
 
@@ -30,4 +30,9 @@ def __getattr__(name):
         from rasterize import highway
 
         return getattr(highway, name)
+    if name in ("scene_from_commonroad", "RecordedTraffic"):
+        # Reading CommonRoad files needs the optional commonroad-io package.
+        from rasterize import commonroad
+
+        return getattr(commonroad, name)
     raise AttributeError(name)
