@@ -85,38 +85,6 @@ class RecordingPlanner:
         return plan
 
 
-_CLASS_DEFAULTS: dict = {}
-
-
-def _restore_vehicle_class_defaults() -> None:
-    """Undo class-level parameter changes that one env leaves behind for the next.
-
-    highway-env's intersection env sets IDMVehicle.DISTANCE_WANTED / COMFORT_ACC_* on the class
-    itself (even when it is only created), so without this a highway episode run after an
-    intersection one in the same process would drive with other IDM parameters, and results
-    would depend on job order. The pristine values come from a fresh execution of highway-env's
-    behaviour module, so they are right even if an env already changed the live classes.
-    """
-    import importlib.util
-
-    from highway_env.vehicle import behavior
-
-    if not _CLASS_DEFAULTS:
-        spec = importlib.util.spec_from_file_location("_pristine_highway_env_behavior", behavior.__file__)
-        fresh = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(fresh)
-        for name in ("IDMVehicle", "LinearVehicle"):
-            _CLASS_DEFAULTS[getattr(behavior, name)] = {
-                k: v for k, v in vars(getattr(fresh, name)).items()
-                if k.isupper() and isinstance(v, (int, float))}
-    for cls, values in _CLASS_DEFAULTS.items():
-        for key in [k for k, v in vars(cls).items() if k.isupper() and isinstance(v, (int, float))
-                    and k not in values]:
-            delattr(cls, key)
-        for key, value in values.items():
-            setattr(cls, key, value)
-
-
 def _planner(spec: str, seed: int):
     from riskmap.registry import make_planner
 
@@ -172,7 +140,6 @@ def _drive(job: Job) -> tuple[dict, bytes]:
                          episode_s=job.budget.episode_s)
     planner = _planner(job.planner, job.planner_seed)
     env = _env(job.env_id, job.budget.control_hz)
-    _restore_vehicle_class_defaults()
     recording = None if isinstance(planner, HumanDriver) else RecordingPlanner(planner)
     attack_seed = int(np.random.SeedSequence([job.planner_seed, job.scene_seed, job.episode])
                       .generate_state(1)[0])

@@ -102,6 +102,39 @@ def _off_network(road, vehicle, margin_m: float = 1.0) -> bool:
     return not lane.on_lane(vehicle.position, margin=margin_m)
 
 
+_CLASS_DEFAULTS: dict = {}
+
+
+def restore_vehicle_class_defaults() -> None:
+    """Undo class-level parameter changes that one env leaves behind for the next.
+
+    highway-env's intersection env sets IDMVehicle.DISTANCE_WANTED / COMFORT_ACC_* on the class
+    itself (even when it is only created), so without this a highway episode run after an
+    intersection one in the same process would drive with other IDM parameters, and results
+    would depend on what ran before. The intersection env sets its values again at each reset.
+    The pristine values come from a fresh execution of highway-env's behaviour module, so they
+    are right even if an env already changed the live classes.
+    """
+    import importlib.util
+
+    from highway_env.vehicle import behavior
+
+    if not _CLASS_DEFAULTS:
+        spec = importlib.util.spec_from_file_location("_pristine_highway_env_behavior", behavior.__file__)
+        fresh = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(fresh)
+        for name in ("IDMVehicle", "LinearVehicle"):
+            _CLASS_DEFAULTS[getattr(behavior, name)] = {
+                k: v for k, v in vars(getattr(fresh, name)).items()
+                if k.isupper() and isinstance(v, (int, float))}
+    for cls, values in _CLASS_DEFAULTS.items():
+        for key in [k for k, v in vars(cls).items() if k.isupper() and isinstance(v, (int, float))
+                    and k not in values]:
+            delattr(cls, key)
+        for key, value in values.items():
+            setattr(cls, key, value)
+
+
 class Episode:
     """Reset `env` for (seed, episode), install the human ego, record every vehicle each step.
 
@@ -116,6 +149,7 @@ class Episode:
         self.env, self.base = env, env.unwrapped
         self.setup = FAMILY_SETUPS[family_of_env(env_id)]
         self.seed = episode_seed(seed, episode)
+        restore_vehicle_class_defaults()
         env.reset(seed=self.seed)
         rng = np.random.default_rng([seed, episode, 1])
         self.driver = _install_human_ego(self.base, rng, self.setup)
