@@ -56,8 +56,10 @@ def _min_gap(road, ego, radius: float) -> float:
     return min(gaps, default=float("inf"))
 
 
-def drive_episode(env, planner, config: DriveConfig, episode: int, frames_dir: Path | None = None
-                  ) -> dict:
+def drive_episode(env, planner, config: DriveConfig, episode: int, frames_dir: Path | None = None,
+                  hooks: tuple = ()) -> dict:
+    """One closed-loop episode. `hooks`: callables run with the `Episode` once the ego is set up
+    (after the planner's own `attach(run)`, if it has one), e.g. to script other traffic."""
     run = Episode(env, config.env_id, config.seed, episode, config.control_hz)
     human = isinstance(planner, HumanDriver)
     controller = TrackingController(ControllerConfig())
@@ -67,6 +69,10 @@ def drive_episode(env, planner, config: DriveConfig, episode: int, frames_dir: P
     if not human:
         vehicle = hand_over_to_planner(run)
         planner.reset(run.recorder.scene(0, config.history_s, 0.0))
+    if hasattr(planner, "attach"):
+        planner.attach(run)
+    for hook in hooks:
+        hook(run)
     distance = 0.0
     n_steps = int(round(config.episode_s * config.control_hz))
     for k in range(n_steps):
