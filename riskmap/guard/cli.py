@@ -9,7 +9,8 @@ from pathlib import Path
 def cmd_collect(args: argparse.Namespace) -> int:
     from riskmap.guard.dataset import GuardCollectConfig, collect
 
-    config = GuardCollectConfig(train_episodes=args.train_episodes, seen_test_episodes=args.seen_episodes,
+    config = GuardCollectConfig(seen_envs=tuple(args.seen_envs.split(",")),
+                                unseen_envs=tuple(args.unseen_envs.split(",")), train_episodes=args.train_episodes, seen_test_episodes=args.seen_episodes,
                                 unseen_episodes=args.unseen_episodes, planner_every=args.planner_every,
                                 seed=args.seed, episode_s=args.episode_s)
     manifest = collect(config, Path(args.out), resume=args.resume, progress=not args.quiet)
@@ -39,6 +40,9 @@ def add_parser(sub, positive_int) -> None:
     guard_sub = p.add_subparsers(dest="guard_command", required=True)
     q = guard_sub.add_parser("collect", help="(ego, neighbour) accident windows from closed-loop episodes")
     q.add_argument("--out", required=True, help="dataset directory to create")
+    q.add_argument("--seen-envs", default="highway-v0,merge-v0",
+                   help="comma-separated scenario families for training and the seen test")
+    q.add_argument("--unseen-envs", default="intersection-v0", help="comma-separated held-out families")
     q.add_argument("--train-episodes", type=positive_int, default=40,
                    help="episodes per seen family (train + validation)")
     q.add_argument("--seen-episodes", type=positive_int, default=12, help="seen-test episodes per family")

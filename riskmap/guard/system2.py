@@ -78,6 +78,12 @@ class DecelerationAgent:
         self._percepts = []
         self._agent.intentions.clear()
 
+    def set_speed_threshold(self, speed_mps: float) -> None:
+        """Replace the belief speed_threshold(T) (it differs between scenario families)."""
+        for literal in list(self._agent.beliefs[("speed_threshold", 1)]):
+            self._untell(literal)
+        self._tell("speed_threshold", float(speed_mps))
+
     @property
     def braking_frames_left(self) -> float | None:
         """K of the belief braking(K), or None when no sustained deceleration is under way."""
