@@ -83,8 +83,8 @@ def summarise(out: Path) -> list[dict]:
 
 
 def markdown(rows: list[dict]) -> str:
-    lines = ["| env | scene | planner | variant | episodes | collisions | collision rate | distance (m) | "
-             "mean speed (m/s) | frames | interventions | BDI ratio |", "|" + "---|" * 12]
+    lines = [("| env | scene | planner | variant | episodes | collisions | collision rate | distance (m) | "
+             "mean speed (m/s) | frames | interventions | BDI ratio |"), "|" + "---|" * 12]
     for r in rows:
         ratio = f"{r['intervention_ratio']:.3f}" if r["intervention_ratio"] is not None else "–"
         lines.append(f"| {r['env']} | {r['scene']} | {r['inner']} | {r['variant']} | {r['episodes']} | "

@@ -78,7 +78,7 @@ def plan_jobs(config: GuardCollectConfig) -> list[Job]:
                 for aggressive in (False, True):
                     jobs.append(Job(split, env_id, driver, seed, episode, aggressive))
 
-    n_val = int(round(config.train_episodes * config.val_fraction))
+    n_val = round(config.train_episodes * config.val_fraction)
     for env_id in config.seen_envs:
         add("train", env_id, config.seed, range(config.train_episodes - n_val))
         add("val", env_id, config.seed, range(config.train_episodes - n_val, config.train_episodes))
@@ -96,8 +96,8 @@ def crash_partner(ds_last: np.ndarray) -> int:
 def extract_windows(states, valid, sizes, kinds, ego: int, crashed: bool, config: GuardCollectConfig,
                     rng: np.random.Generator) -> dict[str, np.ndarray]:
     """Windows of one recorded episode (arrays as `TrafficRecorder.arrays()`, 1/control_hz s)."""
-    seg = int(round(SEGMENT_S * config.control_hz))
-    horizon = int(round(HORIZON_S * config.control_hz))
+    seg = round(SEGMENT_S * config.control_hz)
+    horizon = round(HORIZON_S * config.control_hz)
     n_steps = states.shape[1]
     ds = scene_separations(states, valid, sizes, ego)
     crash_step = n_steps - 1 if crashed else None
@@ -159,7 +159,7 @@ def run_job(job: Job, config: GuardCollectConfig, env, planner) -> tuple[dict, d
                               config, rng)
     meta = {**asdict(job), "collided": bool(record["collided"]), "simulated_s": record["simulated_s"],
             "aggressor": bool(hooks[-1].aggressor is not None) if job.aggressive else False,
-            "windows": int(len(windows["label"])), "positives": int(windows["label"].sum())}
+            "windows": len(windows["label"]), "positives": int(windows["label"].sum())}
     return windows, meta
 
 

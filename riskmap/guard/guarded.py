@@ -200,7 +200,7 @@ def guarded_idm_class():
         def act(self, action=None):
             if self.crashed:
                 return
-            every = max(int(round(self.guard.run.rate_hz / self.guard.config.decision_hz)), 1)
+            every = max(round(self.guard.run.rate_hz / self.guard.config.decision_hz), 1)
             if self._acts % every == 0:
                 self.guard.step(self.guard.history_scene(None))
             self._acts += 1

@@ -13,7 +13,7 @@ def binary_metrics(labels: np.ndarray, probs: np.ndarray, threshold: float) -> d
     probs = np.asarray(probs, dtype=np.float64)
     both = 0 < labels.sum() < len(labels)
     predicted = (probs >= threshold).astype(int)
-    return {"n": int(len(labels)), "positives": int(labels.sum()), "threshold": threshold,
+    return {"n": len(labels), "positives": int(labels.sum()), "threshold": threshold,
             "ap": float(average_precision_score(labels, probs)) if both else None,
             "auc": float(roc_auc_score(labels, probs)) if both else None,
             "accuracy": float(accuracy_score(labels, predicted)),

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import io
 import json
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -35,7 +35,7 @@ class GuardTrainConfig:
     lr: float = 4e-4
     batch_size: int = 8
     seed: int = 0
-    model: TGATConfig = TGATConfig()
+    model: TGATConfig = field(default_factory=TGATConfig)
 
 
 def _tensors(split: dict) -> tuple[torch.Tensor, ...]:
@@ -81,7 +81,8 @@ def train(data: Path, out: Path, config: GuardTrainConfig = GuardTrainConfig(), 
     history, best, epoch0 = [], {"val_ap": -1.0, "epoch": None}, 0
     if resume and state_path.exists():
         state = torch.load(state_path, weights_only=False)
-        if state["config"] != asdict(config):
+        # More epochs (or patience) may be asked for on resume; everything else must match.
+        if state["config"] | {"epochs": config.epochs, "patience": config.patience} != asdict(config):
             raise InputError(f"--out {out} was trained with other settings; choose another --out")
         model.load_state_dict(state["model"])
         optimiser.load_state_dict(state["optimiser"])
@@ -101,7 +102,7 @@ def train(data: Path, out: Path, config: GuardTrainConfig = GuardTrainConfig(), 
             optimiser.zero_grad()
             loss.backward()
             optimiser.step()
-            losses.append(float(loss))
+            losses.append(float(loss.detach()))
         row = {"epoch": epoch, "train_loss": float(np.mean(losses))}
         row.update({name: evaluate(model, splits[name]) for name in ("val", "seen", "unseen")})
         history.append(row)

@@ -2,13 +2,13 @@ import numpy as np
 import pytest
 
 from riskmap.baselines import ConstantVelocityPlanner
-from riskmap.guard.guarded import (GuardConfig, GuardedPlanner, decelerated_waypoints, obstacle_ahead)
+from riskmap.guard.guarded import GuardConfig, GuardedPlanner, decelerated_waypoints, obstacle_ahead
 from riskmap.planner import Planner
 from tests.scenes import state
 
 agentspeak = pytest.importorskip("agentspeak")
 
-from riskmap.guard.system2 import DecelerationAgent, System2Config  # noqa: E402
+from riskmap.guard.system2 import DecelerationAgent, System2Config
 
 
 def scene_with(ego_speed=12.0, other_xy=(20.0, 0.0), steps=6):

@@ -6,7 +6,7 @@ import pytest
 
 pytest.importorskip("agentspeak")
 
-from riskmap.guard.system2 import DecelerationAgent, System2Config  # noqa: E402
+from riskmap.guard.system2 import DecelerationAgent, System2Config
 
 CONFIG = System2Config(speed_threshold_mps=5.0, decel_mps2=3.0, control_hz=2.0, stop_speed_mps=0.5)
 
