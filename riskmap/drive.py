@@ -74,7 +74,7 @@ def drive_episode(env, planner, config: DriveConfig, episode: int, frames_dir: P
     for hook in hooks:
         hook(run)
     distance = 0.0
-    n_steps = round(config.episode_s * config.control_hz)
+    n_steps = int(round(config.episode_s * config.control_hz))
     for k in range(n_steps):
         ego = run.ego
         if not human:
