@@ -36,9 +36,16 @@ EPISODE_S = {"highway-v0": 20.0, "intersection-v0": 16.0}
 
 
 def run_cell(out: Path, env_id: str, scene: str, inner: str, variant: str, episodes: int, seed: int) -> None:
+    """variant: alone, always, tgat, or tgat@X (the TGAT trigger with alert threshold X)."""
     cell = out / env_id / scene / inner / variant
-    spec = VARIANT_PREFIX[variant] + INNER[inner][env_id]
-    planner = make_planner(spec, seed=seed)
+    base, _, threshold = variant.partition("@")
+    spec = VARIANT_PREFIX[base] + INNER[inner][env_id]
+    if threshold:
+        from riskmap.guard.guarded import make_guarded
+
+        planner = make_guarded("tgat", INNER[inner][env_id], seed=seed, alert_threshold=float(threshold))
+    else:
+        planner = make_planner(spec, seed=seed)
     env = make_env(env_id, 10)
     config = DriveConfig(env_id, episodes, seed=seed, episode_s=EPISODE_S[env_id])
     for episode in range(episodes):
@@ -48,7 +55,7 @@ def run_cell(out: Path, env_id: str, scene: str, inner: str, variant: str, episo
         hooks = (AggressorHook(),) if scene == "aggressive" else ()
         record = drive_episode(env, planner, config, episode, hooks=hooks)
         guard = getattr(planner, "guard", None)
-        record.update({"spec": spec, "scene": scene, "variant": variant, "inner": inner,
+        record.update({"spec": spec + (f" (alert threshold {threshold})" if threshold else ""), "scene": scene, "variant": variant, "inner": inner,
                        "aggressor": bool(hooks and hooks[0].aggressor is not None)})
         if guard is not None:
             record["guard"] = guard.summary()

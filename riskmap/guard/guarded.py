@@ -230,8 +230,10 @@ class GuardedHumanDriver(HumanDriver):
         run.replace_ego(new)
 
 
-def make_guarded(trigger: str, inner_spec: str, seed: int = 0, checkpoint: str = GUARD_CHECKPOINT):
-    """A guarded planner (or guarded IDM ego) around `inner_spec`."""
+def make_guarded(trigger: str, inner_spec: str, seed: int = 0, checkpoint: str = GUARD_CHECKPOINT,
+                 alert_threshold: float | None = None):
+    """A guarded planner (or guarded IDM ego) around `inner_spec`; `alert_threshold` overrides the
+    checkpoint's (0.6)."""
     from riskmap.guard.system2 import DecelerationAgent, System2Config
     from riskmap.registry import make_planner
 
@@ -241,6 +243,8 @@ def make_guarded(trigger: str, inner_spec: str, seed: int = 0, checkpoint: str =
         from riskmap.guard.predictor import AccidentPredictor
 
         predictor = AccidentPredictor.load(checkpoint)
+        if alert_threshold is not None:
+            predictor.alert_threshold = float(alert_threshold)
     agent = DecelerationAgent(System2Config(decel_mps2=config.decel_mps2, control_hz=config.decision_hz))
     inner = make_planner(inner_spec, seed=seed)
     if isinstance(inner, HumanDriver):
