@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from rasterize.errors import InputError
 from rasterize.frames import ego_from_world, ego_pose
 from rasterize.scene import Scene
 from riskmap.guard.events import nearest_neighbours
@@ -81,8 +82,6 @@ class Guard:
 
     def __init__(self, predictor, agent, config: GuardConfig = GuardConfig()):
         if config.trigger not in TRIGGERS:
-            from rasterize.errors import InputError
-
             raise InputError(f"guard trigger {config.trigger!r} is not one of {TRIGGERS}")
         self.predictor, self.agent, self.config = predictor, agent, config
         self.run = None

@@ -104,3 +104,17 @@ def test_unknown_trigger_is_an_input_error():
 
     with pytest.raises(InputError):
         GuardedPlanner(ConstantVelocityPlanner(), None, DecelerationAgent(), GuardConfig(trigger="never"))
+
+
+def test_registry_builds_guarded_specs_with_the_shipped_checkpoint():
+    from riskmap.guard.guarded import GuardedHumanDriver
+    from riskmap.registry import HumanDriver, make_planner
+
+    guarded_idm = make_planner("guard:idm")
+    assert isinstance(guarded_idm, GuardedHumanDriver) and isinstance(guarded_idm, HumanDriver)
+    assert guarded_idm.guard.config.trigger == "tgat"
+    assert guarded_idm.guard.predictor.alert_threshold == pytest.approx(0.6)
+    always = make_planner("guard-always:cv")
+    assert isinstance(always, GuardedPlanner) and always.guard.predictor is None
+    assert always.guard.config.trigger == "always"
+    assert isinstance(make_planner("guarded:cv"), GuardedPlanner)
