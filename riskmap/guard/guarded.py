@@ -19,6 +19,7 @@ way whenever System 2 slows it down.
 
 from __future__ import annotations
 
+import logging
 import time
 from dataclasses import dataclass, field
 
@@ -33,6 +34,7 @@ from riskmap.planner import PLAN_DT_S, Plan
 from riskmap.registry import HumanDriver
 
 GUARD_CHECKPOINT = "checkpoints/guard_tgat"
+LOG = logging.getLogger("riskmap.guard")
 TRIGGERS = ("tgat", "always")
 
 
@@ -135,6 +137,7 @@ class Guard:
             self.brake_until_s = now + 1.0 / cfg.decision_hz - 1e-9
             self.log.append({"time_s": round(float(now), 3), "mode": decision, "alert": bool(alert),
                              "max_score": max_score, "speed_mps": speed, "obstacle_ahead": ahead})
+            LOG.info("guard intervention: %s", self.log[-1])
         return decision
 
     def braking_now(self) -> bool:

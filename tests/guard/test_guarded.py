@@ -63,12 +63,14 @@ def test_obstacle_ahead_region():
     assert not obstacle_ahead(scene_with(other_xy=(40.0, 0.0)), 30.0, 2.5)     # too far
 
 
-def test_guarded_planner_is_a_planner_and_slows_down_on_alert():
+def test_guarded_planner_is_a_planner_and_slows_down_on_alert(caplog):
     planner, predictor = make(score=0.9)
     scene = scene_with(other_xy=(20.0, 0.0))
     assert isinstance(planner, Planner)
     planner.reset(scene)
-    plan = planner.plan(scene)
+    with caplog.at_level("INFO", logger="riskmap.guard"):
+        plan = planner.plan(scene)
+    assert "guard intervention" in caplog.text and "sustained" in caplog.text
     # obstacle ahead, alert, 12 m/s > 5: the sustained plan; waypoints re-timed to 12 − 3t
     assert planner.guard.log[-1]["mode"] == "sustained"
     assert plan.waypoints[0, 0] == pytest.approx(12 * 0.5 - 1.5 * 0.25)
