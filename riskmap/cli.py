@@ -169,6 +169,10 @@ def build_parser() -> argparse.ArgumentParser:
     q.add_argument("--count", type=_positive_int, default=6)
     q.add_argument("--seed", type=int, default=0)
     q.set_defaults(func=_cmd_figures_plans)
+
+    from riskmap.guard.cli import add_parser as add_guard_parser
+
+    add_guard_parser(sub, _positive_int)
     return parser
 
 

@@ -57,10 +57,12 @@ def _min_gap(road, ego, radius: float) -> float:
 
 
 def drive_episode(env, planner, config: DriveConfig, episode: int, frames_dir: Path | None = None,
-                  observer=None) -> dict:
+                  observer=None, hooks: tuple = ()) -> dict:
     """Drive one episode. `observer` (optional) gets `start(run)` once the episode is reset, before
     the ego is handed to the planner, and `step(run)` after every simulation step: the hook through
-    which a scenario is perturbed and extra metrics are measured."""
+    which a scenario is perturbed and extra metrics are measured. `hooks`: callables run with the
+    `Episode` once the ego is set up (after the planner's own `attach(run)`, if it has one), e.g.
+    to script other traffic."""
     run = Episode(env, config.env_id, config.seed, episode, config.control_hz)
     if observer is not None:
         observer.start(run)
@@ -72,6 +74,10 @@ def drive_episode(env, planner, config: DriveConfig, episode: int, frames_dir: P
     if not human:
         vehicle = hand_over_to_planner(run)
         planner.reset(run.recorder.scene(0, config.history_s, 0.0))
+    if hasattr(planner, "attach"):
+        planner.attach(run)
+    for hook in hooks:
+        hook(run)
     distance = 0.0
     n_steps = int(round(config.episode_s * config.control_hz))
     for k in range(n_steps):

@@ -3,13 +3,15 @@
     idm              the IDM/MOBIL "human": the ego drives itself, no plan is made
     cv               constant velocity: current speed and heading for 6 s
     riskmap:PATH     the risk-map planner from a checkpoint (PATH with or without .safetensors)
+    guard:SPEC       SPEC wrapped in the neuro-symbolic guard, TGAT-triggered (`guarded:` too)
+    guard-always:SPEC  SPEC with the guard's deceleration plan always on at high speed
 """
 
 from __future__ import annotations
 
 from rasterize.errors import InputError
 
-SPECS = ("idm", "cv", "riskmap:PATH")
+SPECS = ("idm", "cv", "riskmap:PATH", "guard:SPEC", "guard-always:SPEC")
 
 
 class HumanDriver:
@@ -32,4 +34,8 @@ def make_planner(spec: str, seed: int = 0, goal_variance: float | None = None):
         from riskmap.planner import RiskMapPlanner
 
         return RiskMapPlanner.load(arg, seed=seed, goal_variance=goal_variance)
+    if kind in ("guard", "guarded", "guard-always") and arg:
+        from riskmap.guard.guarded import make_guarded
+
+        return make_guarded("always" if kind == "guard-always" else "tgat", arg, seed=seed)
     raise InputError(f"unknown planner spec {spec!r}; use one of {', '.join(SPECS)}")

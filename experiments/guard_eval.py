@@ -1,0 +1,128 @@
+"""The guard's closed-loop table (the paper's Tables 2–3 analogue).
+
+For each scenario family and scene kind (natural traffic, or with a scripted aggressive
+neighbour from `riskmap.guard.aggressors`), the same episodes (same seed, same traffic) are
+driven by a planner alone, with the deceleration plan always on at high speed
+(`guard-always:SPEC`), and with the TGAT-triggered plan (`guard:SPEC`). Reported per cell:
+collision rate, progress (distance, mean speed), decision frames, interventions and the BDI
+intervention ratio (share of decision frames that System 2 took over), System 1 / System 2 ms.
+
+    .venv/bin/python experiments/guard_eval.py --out out/guard_eval --episodes 8 --seed 100 \
+        --inner riskmap --variants alone,always,tgat
+    .venv/bin/python experiments/guard_eval.py --out out/guard_eval --table experiments/results/guard/closed_loop
+
+Per episode: OUT/<env>/<scene>/<inner>/<variant>/episode_NNNNNN.json (atomic, resumable).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from riskmap.atomic import write_json
+from riskmap.drive import DriveConfig, drive_episode
+from riskmap.episode import make_env
+from riskmap.guard.aggressors import AggressorHook
+from riskmap.registry import make_planner
+
+INNER = {"idm": {"highway-v0": "idm", "intersection-v0": "idm"},
+         "riskmap": {"highway-v0": "riskmap:checkpoints/riskmap_highway",
+                     "intersection-v0": "riskmap:checkpoints/riskmap_intersection"}}
+VARIANT_PREFIX = {"alone": "", "always": "guard-always:", "tgat": "guard:"}
+EPISODE_S = {"highway-v0": 20.0, "intersection-v0": 16.0}
+
+
+def run_cell(out: Path, env_id: str, scene: str, inner: str, variant: str, episodes: int, seed: int) -> None:
+    """variant: alone, always, tgat, or tgat@X (the TGAT trigger with alert threshold X)."""
+    cell = out / env_id / scene / inner / variant
+    base, _, threshold = variant.partition("@")
+    spec = VARIANT_PREFIX[base] + INNER[inner][env_id]
+    if threshold:
+        from riskmap.guard.guarded import make_guarded
+
+        planner = make_guarded("tgat", INNER[inner][env_id], seed=seed, alert_threshold=float(threshold))
+    else:
+        planner = make_planner(spec, seed=seed)
+    env = make_env(env_id, 10)
+    config = DriveConfig(env_id, episodes, seed=seed, episode_s=EPISODE_S[env_id])
+    for episode in range(episodes):
+        path = cell / f"episode_{episode:06d}.json"
+        if path.exists():
+            continue
+        hooks = (AggressorHook(),) if scene == "aggressive" else ()
+        record = drive_episode(env, planner, config, episode, hooks=hooks)
+        guard = getattr(planner, "guard", None)
+        record.update({"spec": spec + (f" (alert threshold {threshold})" if threshold else ""), "scene": scene, "variant": variant, "inner": inner,
+                       "aggressor": bool(hooks and hooks[0].aggressor is not None)})
+        if guard is not None:
+            record["guard"] = guard.summary()
+            record["guard_log"] = guard.log
+        write_json(path, record)
+        print(f"{env_id} {scene} {inner} {variant} episode {episode}: collided {record['collided']}", flush=True)
+
+
+def summarise(out: Path) -> list[dict]:
+    rows = []
+    for cell in sorted(p for p in out.glob("*/*/*/*") if p.is_dir()):
+        records = [json.loads(p.read_text()) for p in sorted(cell.glob("episode_*.json"))]
+        if not records:
+            continue
+        env_id, scene, inner, variant = cell.relative_to(out).parts
+        frames = sum(r["guard"]["frames"] for r in records if "guard" in r)
+        interventions = sum(r["guard"]["interventions"] for r in records if "guard" in r)
+        s1 = [x for r in records if "guard" in r for x in r["guard"]["system1_ms"]]
+        s2 = [x for r in records if "guard" in r for x in r["guard"]["system2_ms"]]
+        rows.append({
+            "env": env_id, "scene": scene, "inner": inner, "variant": variant, "episodes": len(records),
+            "collisions": int(sum(r["collided"] for r in records)),
+            "collision_rate": float(np.mean([r["collided"] for r in records])),
+            "distance_m": float(np.mean([r["distance_m"] for r in records])),
+            "mean_speed_mps": float(np.mean([r["mean_speed_mps"] for r in records])),
+            "frames": frames, "interventions": interventions,
+            "intervention_ratio": interventions / frames if frames else None,
+            "system1_ms_median": float(np.median(s1)) if s1 else None,
+            "system2_ms_median": float(np.median(s2)) if s2 else None,
+        })
+    return rows
+
+
+def markdown(rows: list[dict]) -> str:
+    lines = [("| env | scene | planner | variant | episodes | collisions | collision rate | distance (m) | "
+             "mean speed (m/s) | frames | interventions | BDI ratio |"), "|" + "---|" * 12]
+    for r in rows:
+        ratio = f"{r['intervention_ratio']:.3f}" if r["intervention_ratio"] is not None else "–"
+        lines.append(f"| {r['env']} | {r['scene']} | {r['inner']} | {r['variant']} | {r['episodes']} | "
+                     f"{r['collisions']} | {r['collision_rate']:.2f} | {r['distance_m']:.0f} | "
+                     f"{r['mean_speed_mps']:.1f} | {r['frames'] or '–'} | {r['interventions'] or 0} | {ratio} |")
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument("--envs", default="highway-v0,intersection-v0")
+    parser.add_argument("--scenes", default="natural,aggressive")
+    parser.add_argument("--inner", default="riskmap", help="comma-separated: idm, riskmap")
+    parser.add_argument("--variants", default="alone,always,tgat")
+    parser.add_argument("--episodes", type=int, default=8)
+    parser.add_argument("--seed", type=int, default=100)
+    parser.add_argument("--table", type=Path, default=None, help="write PREFIX.json and PREFIX.md only")
+    args = parser.parse_args()
+    if args.table is None:
+        for env_id in args.envs.split(","):
+            for scene in args.scenes.split(","):
+                for inner in args.inner.split(","):
+                    for variant in args.variants.split(","):
+                        run_cell(args.out, env_id, scene, inner, variant, args.episodes, args.seed)
+    rows = summarise(args.out)
+    if args.table is not None:
+        write_json(args.table.with_suffix(".json"), rows)
+        args.table.with_suffix(".md").write_text(markdown(rows))
+    print(markdown(rows))
+
+
+if __name__ == "__main__":
+    main()

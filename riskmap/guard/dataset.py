@@ -1,0 +1,222 @@
+"""`riskmap guard collect`: (ego, neighbour) accident windows from closed-loop episodes.
+
+Every job is one episode: a scenario family, a driver of the ego (the IDM/MOBIL human or the
+risk-map planner), a seed and an episode number, natural or with a scripted aggressive
+neighbour (`riskmap.guard.aggressors`). Natural and aggressive runs of the same (seed, episode)
+meet the same traffic: they are paired accident/normal runs.
+
+Labels: a window is positive when the ego collides with that neighbour within HORIZON_S (1 s:
+segments 7–8) after its last observed event. Every crash yields positive windows ending 0.1 s
+to 1 s before it; negatives are the other pairs of the same episodes, every 0.5 s, half the
+nearest by d_s and half at random, at most `negatives_per_episode`.
+
+Splits: train and validation episodes (seed `seed`) and the seen test episodes (seed `seed + 1`,
+independent traffic) come from the seen families; the unseen test comes from the held-out family.
+
+Layout: DIR/jobs/<job>.npz (atomic; `--resume` skips those present), DIR/manifest.json.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from rasterize.errors import InputError
+from riskmap.atomic import write_json, write_npz
+from riskmap.guard.events import scene_separations
+from riskmap.guard.features import EDGE_DIM, HORIZON_S, NODE_DIM, OBSERVED, SEGMENT_S, window_features
+from riskmap.provenance import provenance
+
+PLANNER_CHECKPOINTS = {"highway-v0": "checkpoints/riskmap_highway",
+                       "intersection-v0": "checkpoints/riskmap_intersection"}
+
+
+@dataclass(frozen=True)
+class GuardCollectConfig:
+    seen_envs: tuple[str, ...] = ("highway-v0", "merge-v0")
+    unseen_envs: tuple[str, ...] = ("intersection-v0",)
+    train_episodes: int = 40          # per seen family and driver, natural + aggressive each
+    seen_test_episodes: int = 12
+    unseen_episodes: int = 16
+    val_fraction: float = 0.2         # the last episodes of the training seed
+    planner_every: int = 4            # every k-th episode is driven by the risk-map planner too
+    seed: int = 0
+    episode_s: float = 20.0           # simulated seconds per episode (the crash comes early)
+    control_hz: int = 10
+    max_ds_m: float = 50.0            # farther pairs are not interactions
+    negatives_per_episode: int = 24
+
+
+@dataclass(frozen=True)
+class Job:
+    split: str            # train, val, seen, unseen
+    env_id: str
+    driver: str           # planner SPEC
+    seed: int
+    episode: int
+    aggressive: bool
+
+    @property
+    def name(self) -> str:
+        driver = self.driver.split(":")[0]
+        kind = "agg" if self.aggressive else "nat"
+        return f"{self.split}_{self.env_id}_{driver}_s{self.seed}_e{self.episode:04d}_{kind}"
+
+
+def plan_jobs(config: GuardCollectConfig) -> list[Job]:
+    jobs = []
+
+    def add(split, env_id, seed, episodes):
+        for episode in episodes:
+            drivers = ["idm"]
+            if env_id in PLANNER_CHECKPOINTS and episode % config.planner_every == 0:
+                drivers.append(f"riskmap:{PLANNER_CHECKPOINTS[env_id]}")
+            for driver in drivers:
+                for aggressive in (False, True):
+                    jobs.append(Job(split, env_id, driver, seed, episode, aggressive))
+
+    n_val = round(config.train_episodes * config.val_fraction)
+    for env_id in config.seen_envs:
+        add("train", env_id, config.seed, range(config.train_episodes - n_val))
+        add("val", env_id, config.seed, range(config.train_episodes - n_val, config.train_episodes))
+        add("seen", env_id, config.seed + 1, range(config.seen_test_episodes))
+    for env_id in config.unseen_envs:
+        add("unseen", env_id, config.seed + 2, range(config.unseen_episodes))
+    return jobs
+
+
+def crash_partner(ds_last: np.ndarray) -> int:
+    """The neighbour the ego hit: the smallest d_s at the crash step (overlap is negative)."""
+    return int(np.argmin(ds_last))
+
+
+def extract_windows(states, valid, sizes, kinds, ego: int, crashed: bool, config: GuardCollectConfig,
+                    rng: np.random.Generator) -> dict[str, np.ndarray]:
+    """Windows of one recorded episode (arrays as `TrafficRecorder.arrays()`, 1/control_hz s)."""
+    seg = round(SEGMENT_S * config.control_hz)
+    horizon = round(HORIZON_S * config.control_hz)
+    n_steps = states.shape[1]
+    ds = scene_separations(states, valid, sizes, ego)
+    crash_step = n_steps - 1 if crashed else None
+    partner = crash_partner(ds[:, -1]) if crashed else None
+    positives, negatives = [], []
+    if crashed:
+        for k in range(crash_step - horizon, crash_step):
+            if k >= 0 and valid[partner, k]:
+                positives.append((partner, k))
+    last_labelled = crash_step - 1 if crashed else n_steps - 1 - horizon
+    for k in range(seg, last_labelled + 1, seg):
+        for i in np.flatnonzero(np.isfinite(ds[:, k]) & (ds[:, k] < config.max_ds_m)):
+            if (int(i), k) not in positives:
+                negatives.append((int(i), k))
+    if len(negatives) > config.negatives_per_episode:
+        order = np.argsort([ds[i, k] for i, k in negatives], kind="stable")
+        half = config.negatives_per_episode // 2
+        nearest = list(order[:half])
+        rest = rng.choice(order[half:], config.negatives_per_episode - half, replace=False)
+        negatives = [negatives[j] for j in sorted(nearest + list(rest))]
+    rows = [(i, k, 1) for i, k in positives] + [(i, k, 0) for i, k in negatives]
+    out = {"node_u": np.zeros((len(rows), NODE_DIM), np.float32),
+           "node_i": np.zeros((len(rows), NODE_DIM), np.float32),
+           "edge": np.zeros((len(rows), OBSERVED, EDGE_DIM), np.float32),
+           "mask": np.zeros((len(rows), OBSERVED), bool),
+           "label": np.array([r[2] for r in rows], np.int8),
+           "neighbour": np.array([r[0] for r in rows], np.int32),
+           "last_step": np.array([r[1] for r in rows], np.int32)}
+    for w, (i, k, _) in enumerate(rows):
+        out["node_u"][w], out["node_i"][w], out["edge"][w], out["mask"][w] = window_features(
+            states, valid, sizes, kinds, ego, i, k, seg)
+    return out
+
+
+class _KeepRun:
+    """Episode hook that keeps the `Episode` so that its recording can be read afterwards."""
+
+    run = None
+
+    def __call__(self, run) -> None:
+        self.run = run
+
+
+def run_job(job: Job, config: GuardCollectConfig, env, planner) -> tuple[dict, dict]:
+    from riskmap.drive import DriveConfig, drive_episode
+    from riskmap.guard.aggressors import AggressorHook
+
+    keep = _KeepRun()
+    hooks = (keep, AggressorHook()) if job.aggressive else (keep,)
+    drive_config = DriveConfig(job.env_id, job.episode + 1, seed=job.seed, control_hz=config.control_hz,
+                               episode_s=config.episode_s)
+    record = drive_episode(env, planner, drive_config, job.episode, hooks=hooks)
+    states, valid, sizes, kinds = keep.run.recorder.arrays()
+    # The recorder's state rows also count vehicle objects that continue another agent's record
+    # (the ego handed to a planner, an aggressor); agent ids index the first len(sizes) rows.
+    states, valid = states[:len(sizes)], valid[:len(sizes)]
+    rng = np.random.default_rng([job.seed, job.episode, int(job.aggressive), 7])
+    windows = extract_windows(states, valid, sizes, kinds, keep.run.recorder.ego_id, bool(record["collided"]),
+                              config, rng)
+    meta = {**asdict(job), "collided": bool(record["collided"]), "simulated_s": record["simulated_s"],
+            "aggressor": bool(hooks[-1].aggressor is not None) if job.aggressive else False,
+            "windows": len(windows["label"]), "positives": int(windows["label"].sum())}
+    return windows, meta
+
+
+def collect(config: GuardCollectConfig, out: Path, resume: bool = False, progress: bool = True) -> dict:
+    from tqdm import tqdm
+
+    from riskmap.episode import make_env
+    from riskmap.registry import make_planner
+
+    out = Path(out)
+    jobs_dir = out / "jobs"
+    if jobs_dir.exists() and any(jobs_dir.iterdir()) and not resume:
+        raise InputError(f"--out {out} already holds guard data; pass --resume to continue or choose "
+                         "another --out")
+    settings = out / "settings.json"
+    if resume and settings.exists() and json.loads(settings.read_text())["config"] != \
+            json.loads(json.dumps(asdict(config))):
+        raise InputError(f"--out {out} was collected with other settings; choose another --out")
+    write_json(settings, {"config": asdict(config), **provenance()})
+    envs, planners, metas = {}, {}, []
+    for job in tqdm(plan_jobs(config), disable=not progress, desc="guard collect"):
+        path = jobs_dir / f"{job.name}.npz"
+        meta_path = jobs_dir / f"{job.name}.json"
+        if resume and path.exists() and meta_path.exists():
+            metas.append(json.loads(meta_path.read_text()))
+            continue
+        if job.env_id not in envs:
+            envs[job.env_id] = make_env(job.env_id, config.control_hz)
+        if job.driver not in planners:
+            planners[job.driver] = make_planner(job.driver, seed=job.seed)
+        windows, meta = run_job(job, config, envs[job.env_id], planners[job.driver])
+        write_npz(path, windows)
+        write_json(meta_path, meta)
+        metas.append(meta)
+    manifest = {"config": asdict(config), "jobs": len(metas), "splits": split_counts(metas), **provenance()}
+    write_json(out / "manifest.json", manifest)
+    return manifest
+
+
+def split_counts(metas: list[dict]) -> dict:
+    counts = {}
+    for m in metas:
+        c = counts.setdefault(m["split"], {"episodes": 0, "crashes": 0, "windows": 0, "positives": 0})
+        c["episodes"] += 1
+        c["crashes"] += int(m["collided"])
+        c["windows"] += m["windows"]
+        c["positives"] += m["positives"]
+    return counts
+
+
+def load_split(data: Path, split: str) -> dict[str, np.ndarray]:
+    """All windows of `split` concatenated (keys as `extract_windows`, plus `job` indices)."""
+    paths = sorted((Path(data) / "jobs").glob(f"{split}_*.npz"))
+    if not paths:
+        raise InputError(f"no {split!r} windows under {data}/jobs; run `riskmap guard collect --out {data}`")
+    parts = [dict(np.load(p)) for p in paths]
+    merged = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    merged["job"] = np.concatenate([np.full(len(p["label"]), j) for j, p in enumerate(parts)])
+    return merged
+

@@ -1,0 +1,43 @@
+// System 2 of the guard: the deceleration plans, run once per control step.
+//
+// Perceived each step (added and removed by the orchestrator):
+//   alert            the accident predictor's warning (or always present: the "always on" mode)
+//   speed(V)         the ego's speed, m/s
+//   obstacle_ahead   a vehicle inside the region ahead of the ego
+// Parameters (added once): speed_threshold(T) m/s, decel_rate(A) m/s^2, control_hz(F),
+//   stop_speed(S) m/s.
+// Mental state: braking(K), the frames of a sustained deceleration still to go.
+// Action: .slow_down(Mode) asks for one control frame of deceleration at A
+//   (Mode is single or sustained, for the intervention log).
+//
+// The first applicable plan wins, so the order below is the priority.
+
+// A sustained deceleration ends early once the ego has (nearly) stopped.
++!control : braking(K) & speed(V) & stop_speed(S) & V < S
+    <- -braking(K).
+
+// A sustained deceleration goes on: one frame fewer to go.
++!control : braking(K) & K > 1
+    <- -braking(K);
+       +braking(K - 1);
+       .slow_down(sustained).
+
+// Its last frame.
++!control : braking(K)
+    <- -braking(K);
+       .slow_down(sustained).
+
+// Warning, an obstacle ahead and high speed: decelerate for N = (v0 / a) * f frames,
+// this one included.
++!control : alert & obstacle_ahead & speed(V) & speed_threshold(T) & V > T
+            & decel_rate(A) & control_hz(F)
+    <- +braking(V / A * F - 1);
+       .slow_down(sustained).
+
+// Algorithm 1: warning and high speed, nothing straight ahead: a single-frame slowdown.
++!control : alert & speed(V) & speed_threshold(T) & V > T
+    <- .slow_down(single).
+
+// Otherwise the planner keeps control.
++!control
+    <- true.

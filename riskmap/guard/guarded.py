@@ -1,0 +1,254 @@
+"""`GuardedPlanner`: the dual-system guard wrapped around any planner (and around the IDM ego).
+
+Every decision step (2 Hz, the segment rate of the accident predictor):
+  System 1  scores the two neighbours with the smallest d_s to the ego; the highest score against
+            the alert threshold (0.6) sets the `alert` belief (trigger "tgat"), or `alert` is
+            simply always present (trigger "always": the deceleration plan on at high speed);
+  System 2  the AgentSpeak deceleration plans decide, from alert, speed(V) and obstacle_ahead,
+            whether this frame is a slowdown ("single"), part of a sustained deceleration
+            ("sustained") or left to the planner (None).
+A slowdown frame lasts one decision step (0.5 s) and asks for a deceleration of `decel_mps2`:
+in the closed-loop harness the ego's acceleration is capped at −decel_mps2 for that frame; the
+returned plan is also re-timed to that deceleration along the planner's own path, so that a
+harness which only tracks plans sees the same intent. Every intervention is logged.
+
+Around the IDM/MOBIL ego (SPEC `guard:idm`) there is no plan to wrap: `GuardedHumanDriver`
+replaces the ego by an IDM vehicle with the same parameters whose acceleration is capped the same
+way whenever System 2 slows it down.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rasterize.errors import InputError
+from rasterize.frames import ego_from_world, ego_pose
+from rasterize.scene import Scene
+from riskmap.guard.events import nearest_neighbours
+from riskmap.guard.features import OBSERVED, SEGMENT_S
+from riskmap.planner import PLAN_DT_S, Plan
+from riskmap.registry import HumanDriver
+
+GUARD_CHECKPOINT = "checkpoints/guard_tgat"
+LOG = logging.getLogger("riskmap.guard")
+TRIGGERS = ("tgat", "always")
+
+
+@dataclass(frozen=True)
+class GuardConfig:
+    trigger: str = "tgat"               # "tgat" or "always"
+    neighbours: int = 2                 # scored by System 1 each step (smallest d_s first)
+    obstacle_ahead_m: float = 30.0      # x_l: obstacle_ahead if a vehicle is this close ahead …
+    obstacle_lateral_m: float = 2.5     # … and at most y_l to either side of the ego's axis (m)
+    decel_mps2: float = 3.0             # a
+    decision_hz: int = 2                # f
+    # "High speed" per scenario family (m/s): above the family's usual cruising speed band.
+    speed_threshold_mps: dict = field(default_factory=lambda: {
+        "highway": 20.0, "merge": 20.0, "roundabout": 8.0, "intersection": 5.0})
+    default_speed_threshold_mps: float = 10.0
+
+
+def obstacle_ahead(scene: Scene, ahead_m: float, lateral_m: float) -> bool:
+    now, ego = scene.current_index, scene.ego_index
+    present = np.flatnonzero(scene.valid[:, now])
+    others = present[present != ego]
+    if not len(others):
+        return False
+    origin, heading = ego_pose(scene)
+    xy = ego_from_world(scene.states[others, now, :2], origin, heading)
+    return bool(((xy[:, 0] > 0) & (xy[:, 0] <= ahead_m) & (np.abs(xy[:, 1]) <= lateral_m)).any())
+
+
+def decelerated_waypoints(waypoints: np.ndarray, speed_mps: float, decel_mps2: float) -> np.ndarray:
+    """The plan's path [12, 2] (ego frame) re-timed to v(t) = max(v0 − a·t, 0)."""
+    path = np.concatenate([[[0.0, 0.0]], np.asarray(waypoints, dtype=np.float64)])
+    seg = np.diff(path, axis=0)
+    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(seg, axis=1))])
+    t = PLAN_DT_S * np.arange(1, len(waypoints) + 1)
+    t_stop = speed_mps / decel_mps2
+    arc = np.where(t < t_stop, speed_mps * t - 0.5 * decel_mps2 * t ** 2, 0.5 * speed_mps * t_stop)
+    out = np.stack([np.interp(arc, s, path[:, 0]), np.interp(arc, s, path[:, 1])], axis=1)
+    beyond = arc > s[-1]
+    if beyond.any():   # past the planned path: continue straight along its last direction
+        last = seg[-1] / max(np.linalg.norm(seg[-1]), 1e-9) if s[-1] > 1e-9 else np.array([1.0, 0.0])
+        out[beyond] = path[-1] + (arc[beyond] - s[-1])[:, None] * last
+    return out
+
+
+class Guard:
+    """The orchestrator: System 1 → alert belief → System 2, once per decision step."""
+
+    def __init__(self, predictor, agent, config: GuardConfig = GuardConfig()):
+        if config.trigger not in TRIGGERS:
+            raise InputError(f"guard trigger {config.trigger!r} is not one of {TRIGGERS}")
+        self.predictor, self.agent, self.config = predictor, agent, config
+        self.run = None
+        self.reset()
+
+    def reset(self) -> None:
+        self.agent.reset()
+        self.log: list[dict] = []
+        self.frames = 0
+        self.timings_s: list[tuple[float, float]] = []   # (System 1, System 2) per step
+        self.brake_until_s = -np.inf
+
+    def attach(self, run) -> None:
+        """A new closed-loop episode: keep its recording (for the 6-segment history) and set the
+        family's speed threshold."""
+        self.reset()
+        self.run = run
+        self.agent.set_speed_threshold(self.config.speed_threshold_mps.get(
+            _family_of(run), self.config.default_speed_threshold_mps))
+
+    def history_scene(self, fallback: Scene | None) -> Scene:
+        """The scene now with OBSERVED segments of history (from the recording when attached)."""
+        if self.run is None:
+            return fallback.past()
+        rec = self.run.recorder
+        return rec.scene(rec.num_steps - 1, history_s=SEGMENT_S * (OBSERVED - 1), future_s=0.0,
+                         dt_s=SEGMENT_S, radius_m=80.0, lanes=False)
+
+    def step(self, scene: Scene) -> str | None:
+        """One decision: returns None, "single" or "sustained" (and logs interventions)."""
+        cfg = self.config
+        t0 = time.perf_counter()
+        max_score, scores = None, []
+        if cfg.trigger == "tgat":
+            neighbours = nearest_neighbours(scene, cfg.neighbours)
+            scores = self.predictor.score(scene.states, scene.valid, scene.sizes, scene.kinds,
+                                          scene.ego_index, neighbours, scene.current_index, 1)
+            max_score = float(scores.max()) if len(scores) else 0.0
+            alert = max_score >= self.predictor.alert_threshold
+        else:
+            alert = True
+        speed = float(scene.ego_state()[4])
+        ahead = obstacle_ahead(scene, cfg.obstacle_ahead_m, cfg.obstacle_lateral_m)
+        t1 = time.perf_counter()
+        decision = self.agent.decide(alert, speed, ahead)
+        t2 = time.perf_counter()
+        self.timings_s.append((t1 - t0, t2 - t1))
+        self.frames += 1
+        if decision is not None:
+            now = self.run.time_s if self.run is not None else scene.time_s
+            self.brake_until_s = now + 1.0 / cfg.decision_hz - 1e-9
+            self.log.append({"time_s": round(float(now), 3), "mode": decision, "alert": bool(alert),
+                             "max_score": max_score, "speed_mps": speed, "obstacle_ahead": ahead})
+            LOG.info("guard intervention: %s", self.log[-1])
+        return decision
+
+    def braking_now(self) -> bool:
+        return self.run is not None and self.run.time_s < self.brake_until_s
+
+    def summary(self) -> dict:
+        t = np.array(self.timings_s) if self.timings_s else np.zeros((0, 2))
+        return {"frames": self.frames, "interventions": len(self.log),
+                "intervention_ratio": len(self.log) / self.frames if self.frames else 0.0,
+                "single": sum(e["mode"] == "single" for e in self.log),
+                "sustained": sum(e["mode"] == "sustained" for e in self.log),
+                "system1_ms": (1000 * t[:, 0]).tolist(), "system2_ms": (1000 * t[:, 1]).tolist()}
+
+
+def _family_of(run) -> str:
+    from riskmap.episode import FAMILY_SETUPS
+
+    return next((name for name, setup in FAMILY_SETUPS.items() if setup is run.setup), "")
+
+
+class GuardedPlanner:
+    """`Planner` around `planner` with System 1 `predictor` (None for trigger "always") and System 2
+    `agent` (a `riskmap.guard.system2.DecelerationAgent`)."""
+
+    def __init__(self, planner, predictor, agent, config: GuardConfig = GuardConfig()):
+        self.planner = planner
+        self.guard = Guard(predictor, agent, config)
+        self.raster = getattr(planner, "raster", None)   # for the drive harness's plan figures
+
+    def reset(self, scene: Scene) -> None:
+        self.planner.reset(scene)
+        self.guard.reset()
+
+    def attach(self, run) -> None:
+        """Closed-loop hook: cap the ego's acceleration during slowdown frames."""
+        self.guard.attach(run)
+        vehicle, guard, decel = run.ego, self.guard, self.guard.config.decel_mps2
+        command = vehicle.command
+
+        def guarded_command(accel: float, steer_ccw: float) -> None:
+            command(min(accel, -decel) if guard.braking_now() else accel, steer_ccw)
+
+        vehicle.command = guarded_command   # this vehicle object only, for this episode
+
+    def plan(self, scene: Scene) -> Plan:
+        plan = self.planner.plan(scene)
+        t0 = time.perf_counter()
+        decision = self.guard.step(self.guard.history_scene(scene))
+        plan.timings_s["guard"] = time.perf_counter() - t0
+        if decision is not None:
+            plan.waypoints = decelerated_waypoints(plan.waypoints, float(scene.ego_state()[4]),
+                                                   self.guard.config.decel_mps2)
+        return plan
+
+
+def guarded_idm_class():
+    from highway_env.vehicle.behavior import IDMVehicle
+
+    class GuardedIDMVehicle(IDMVehicle):
+        """The IDM/MOBIL ego, with its acceleration capped at −a while System 2 slows it down."""
+
+        def act(self, action=None):
+            if self.crashed:
+                return
+            every = max(round(self.guard.run.rate_hz / self.guard.config.decision_hz), 1)
+            if self._acts % every == 0:
+                self.guard.step(self.guard.history_scene(None))
+            self._acts += 1
+            super().act()
+            if self.guard.braking_now():
+                self.action["acceleration"] = min(self.action["acceleration"], -self.guard.config.decel_mps2)
+
+    return GuardedIDMVehicle
+
+
+class GuardedHumanDriver(HumanDriver):
+    """SPEC `guard:idm`: the simulator's IDM/MOBIL ego, guarded (see the module docstring)."""
+
+    name = "guard:idm"
+
+    def __init__(self, predictor, agent, config: GuardConfig = GuardConfig()):
+        self.guard = Guard(predictor, agent, config)
+
+    def attach(self, run) -> None:
+        self.guard.attach(run)
+        old = run.ego
+        new = guarded_idm_class().create_from(old)
+        for name in ("TIME_WANTED", "POLITENESS", "DELTA"):   # the sampled driver's parameters
+            if name in vars(old):
+                setattr(new, name, vars(old)[name])
+        new.guard, new._acts = self.guard, 0
+        run.replace_ego(new)
+
+
+def make_guarded(trigger: str, inner_spec: str, seed: int = 0, checkpoint: str = GUARD_CHECKPOINT,
+                 alert_threshold: float | None = None):
+    """A guarded planner (or guarded IDM ego) around `inner_spec`; `alert_threshold` overrides the
+    checkpoint's (0.6)."""
+    from riskmap.guard.system2 import DecelerationAgent, System2Config
+    from riskmap.registry import make_planner
+
+    config = GuardConfig(trigger=trigger)
+    predictor = None
+    if trigger == "tgat":
+        from riskmap.guard.predictor import AccidentPredictor
+
+        predictor = AccidentPredictor.load(checkpoint)
+        if alert_threshold is not None:
+            predictor.alert_threshold = float(alert_threshold)
+    agent = DecelerationAgent(System2Config(decel_mps2=config.decel_mps2, control_hz=config.decision_hz))
+    inner = make_planner(inner_spec, seed=seed)
+    if isinstance(inner, HumanDriver):
+        return GuardedHumanDriver(predictor, agent, config)
+    return GuardedPlanner(inner, predictor, agent, config)
