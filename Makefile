@@ -14,11 +14,11 @@ DEMO_OUT  ?= out/demo
 
 setup: $(STAMP)
 
-$(STAMP): pyproject.toml
+$(STAMP): pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet $(TORCH_PIN)
-	$(BIN)/python -m pip install --quiet -e '.[dev,commonroad]'
+	$(BIN)/python -m pip install --quiet -c constraints.txt -e '.[dev,commonroad,guard,ray]'
 	$(BIN)/python -m pip install --quiet --no-deps 'commonroad-io==2026.1'   # see pyproject.toml
 	touch $(STAMP)
 
