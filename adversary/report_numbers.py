@@ -75,15 +75,17 @@ def _collision_types(records: list[dict]) -> list[dict]:
 
 
 def _guard_pairs(rows: list[dict]) -> list[dict]:
-    """Rows of `guarded:SPEC` next to the same attack on SPEC, when both ran."""
+    """Rows of `guard:SPEC` (or `guarded:SPEC`) next to the same attack on SPEC, when both ran."""
     by_key = {(r["planner"], r["attack"]): r for r in rows}
     pairs = []
+    metrics = ("collision_rate", "safety_pct", "progress_m")
     for (planner, attack), guarded in sorted(by_key.items()):
-        if planner.startswith("guarded:") and (planner[len("guarded:"):], attack) in by_key:
-            base = by_key[planner[len("guarded:"):], attack]
-            pairs.append({"planner": planner[len("guarded:"):], "attack": attack,
-                          "off": {k: base[k] for k in ("collision_rate", "safety_pct", "progress_m")},
-                          "on": {k: guarded[k] for k in ("collision_rate", "safety_pct", "progress_m")}})
+        prefix, _, inner = planner.partition(":")
+        if prefix in ("guard", "guarded") and (inner, attack) in by_key:
+            base = by_key[inner, attack]
+            pairs.append({"planner": inner, "attack": attack,
+                          "off": {k: base[k] for k in metrics},
+                          "on": {k: guarded[k] for k in metrics}})
     return pairs
 
 
