@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -56,9 +57,24 @@ def _min_gap(road, ego, radius: float) -> float:
     return min(gaps, default=float("inf"))
 
 
-def drive_episode(env, planner, config: DriveConfig, episode: int, frames_dir: Path | None = None
-                  ) -> dict:
-    run = Episode(env, config.env_id, config.seed, episode, config.control_hz)
+@dataclass(frozen=True)
+class DriveHooks:
+    """Optional callbacks into one closed-loop episode; all None drives the episode unchanged.
+
+    setup(base_env): rearrange the road before the first record (initial conditions).
+    perceive(scene, step) -> scene: what the planner is shown instead of the recorded scene
+        (perception degradation); frames still show the recorded scene.
+    on_step(run): called after every control step with the `Episode` (trajectory logging).
+    """
+
+    setup: Callable | None = None
+    perceive: Callable | None = None
+    on_step: Callable | None = None
+
+
+def drive_episode(env, planner, config: DriveConfig, episode: int, frames_dir: Path | None = None,
+                  hooks: DriveHooks = DriveHooks()) -> dict:
+    run = Episode(env, config.env_id, config.seed, episode, config.control_hz, setup=hooks.setup)
     human = isinstance(planner, HumanDriver)
     controller = TrackingController(ControllerConfig())
     plan_times, gaps, speeds = [], [], []
@@ -75,8 +91,9 @@ def drive_episode(env, planner, config: DriveConfig, episode: int, frames_dir: P
             if k % replan_every == 0:
                 scene = run.recorder.scene(run.recorder.num_steps - 1, config.history_s, 0.0,
                                            source=config.env_id)
+                seen = scene if hooks.perceive is None else hooks.perceive(scene, k)
                 started = time.perf_counter()
-                plan = check_plan(planner.plan(scene), type(planner).__name__)
+                plan = check_plan(planner.plan(seen), type(planner).__name__)
                 plan_times.append(time.perf_counter() - started)
                 origin, heading = ego_pose(scene)
                 controller.set_plan(plan.waypoints, origin, heading)
@@ -97,6 +114,8 @@ def drive_episode(env, planner, config: DriveConfig, episode: int, frames_dir: P
         distance += float(np.linalg.norm(run.ego.position - before))
         speeds.append(float(run.ego.speed))
         gaps.append(_min_gap(run.base.road, run.ego, config.gap_radius_m))
+        if hooks.on_step is not None:
+            hooks.on_step(run)
         if run.done:
             break
     return {
