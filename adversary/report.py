@@ -90,12 +90,13 @@ def _plot_evolution(template: Template, best: list[dict | None], title: str, pat
     gens = np.arange(1, len(best) + 1)
     z = np.array([template.normalised(r["x"]) if r else np.full(len(template.parameters), np.nan)
                   for r in best])
-    for i, p in enumerate(template.parameters):
-        ax.plot(gens, z[:, i], "-o", ms=3.5, lw=1.2, label=p.name)
     neutral = template.normalised(template.neutral)
-    ax.scatter(np.zeros(len(neutral)) + 0.6, neutral, marker="_", s=120, color="black",
-               label="base scene")
-    ax.set_xlabel("generation (no marker: no failure in that generation)")
+    for i, p in enumerate(template.parameters):
+        (line,) = ax.plot(gens, z[:, i], "-o", ms=3.5, lw=1.2, label=p.name)
+        # The base scene's value, in the same colour, left of generation 1.
+        ax.plot([0.5], [neutral[i]], marker="_", ms=16, mew=2.5, color=line.get_color())
+    ax.set_xlim(0.3, len(best) + 0.5)
+    ax.set_xlabel("generation (dashes at left: base scene; no marker: no failure that generation)")
     ax.set_ylabel("parameter, normalised to its bounds")
     ax.set_ylim(-0.05, 1.05)
     ax.set_xticks(gens)

@@ -21,7 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from rasterize.errors import InputError
-from rasterize.scene import HX, HY, Scene, X, Y
+from rasterize.frames import world_from_highway_env
+from rasterize.scene import HX, HY, SPEED, Scene, X, Y
 
 ENV_ID = "highway-v0"
 SCENE_RADIUS_M = 120.0      # the recorder's scene radius: a sensing range this long removes nothing
@@ -192,6 +193,7 @@ class Scenario:
     def __init__(self, template: Template, params: dict[str, float], seed: int, dt_s: float):
         self.template, self.params, self.seed, self.dt_s = template, params, seed, dt_s
         self.target = None             # the target vehicle once the road is set up
+        self.env = None                # the base env once the road is set up
 
     # -- initial conditions -------------------------------------------------------------------
     def setup(self, base_env) -> None:
@@ -218,12 +220,17 @@ class Scenario:
         road.vehicles = [ego, self.target]
         road.objects = []
         base_env.controlled_vehicles = [ego]
+        self.env = base_env
 
     # -- perception degradation ---------------------------------------------------------------
     def perceive(self, scene: Scene, step: int) -> Scene:
         """The scene the planner is shown at control step `step` (the `DriveHooks.perceive`
         callback). Agents other than the ego are delayed, limited by range, dropped and made
-        noisy; at neutral parameters the recorded scene itself is returned."""
+        noisy; at neutral parameters the recorded scene itself is returned.
+
+        The goal the planner is sent to (`scene.route_xy`, the route rule) is capped behind a
+        leader; it is recomputed from the degraded agents, so that a leader the ego does not
+        perceive does not hold its goal back either."""
         from dataclasses import replace
 
         p = self.params
@@ -251,4 +258,23 @@ class Scenario:
         noise_heading = rng.normal(0.0, 1.0, states.shape[:2])[others] * p["heading_noise_rad"]
         angle = np.arctan2(states[others, :, HY], states[others, :, HX]) + noise_heading
         states[others, :, HX], states[others, :, HY] = np.cos(angle), np.sin(angle)
-        return replace(scene, states=states, valid=valid)
+        route_xy = scene.route_xy
+        if route_xy is not None and self.env is not None:
+            route_xy = self._perceived_route(states[:, now], valid[:, now] & others, scene.sizes)
+        return replace(scene, states=states, valid=valid, route_xy=route_xy)
+
+    def _perceived_route(self, states_now: np.ndarray, seen: np.ndarray, sizes: np.ndarray):
+        """The route rule's goal polyline (world) with the perceived agents as the only traffic.
+        states_now [N, 6] world, seen [N] bool, sizes [N, 2]."""
+        from types import SimpleNamespace
+
+        from rasterize.highway import RouteRule, route_ahead
+
+        ego = self.env.vehicle
+        # world_from_highway_env flips y; the flip is its own inverse.
+        perceived = [SimpleNamespace(
+            position=world_from_highway_env(states_now[i, :2]),
+            velocity=world_from_highway_env(states_now[i, SPEED] * states_now[i, [HX, HY]]),
+            LENGTH=float(sizes[i, 0])) for i in np.flatnonzero(seen)]
+        view = SimpleNamespace(network=self.env.road.network, vehicles=[ego, *perceived])
+        return route_ahead(view, ego, RouteRule())

@@ -58,18 +58,19 @@ def test_neutral_vector_reproduces_the_base_scene_in_closed_loop():
     np.testing.assert_array_equal(target_xy[1:], np.array([p[1] for p in positions]))
 
 
-def _recorded_scene():
+def _recorded_scene(scenario=None, steps: int = 24):
     from rasterize.highway import TrafficRecorder
 
     t = get_template("lead_brakes")
     env = _env()
-    Scenario(t, t.as_dict(t.neutral), 0, 0.1).setup(env.unwrapped)
+    (scenario or Scenario(t, t.as_dict(t.neutral), 0, 0.1)).setup(env.unwrapped)
     road = env.unwrapped.road
     recorder = TrafficRecorder(road, env.unwrapped.vehicle, 0.1)
-    for _ in range(25):
-        recorder.record()
+    recorder.record()
+    for _ in range(steps):    # the env ends at the last recorded state, as in the drive loop
         road.act()
         road.step(0.1)
+        recorder.record()
     return recorder.scene(recorder.num_steps - 1, 2.0, 0.0)
 
 
@@ -129,3 +130,22 @@ def test_wrong_vector_length_is_a_clear_error():
         get_template("cut_in").as_dict(np.zeros(3))
     with pytest.raises(InputError, match="unknown template"):
         get_template("roundabout_merge")
+
+
+def test_goal_is_recomputed_from_what_is_perceived():
+    """The route rule caps the goal behind the leader; a leader the ego cannot see (out of
+    sensing range) no longer caps it, and with everything seen the recomputed goal is the
+    recorded one."""
+    sees_all = _with("lead_brakes", sensing_range_m=119.0)
+    scene = _recorded_scene(sees_all, steps=0)   # at the start: the leader 40 m ahead in lane
+    seen = sees_all.perceive(scene, 0)
+    np.testing.assert_allclose(seen.route_xy, scene.route_xy, atol=1e-9)
+    blind = _with("lead_brakes", sensing_range_m=30.0)
+    blind.env = sees_all.env
+    unseen = blind.perceive(scene, 0)
+    capped = np.linalg.norm(scene.route_xy[-1] - scene.route_xy[0])
+    free = np.linalg.norm(unseen.route_xy[-1] - unseen.route_xy[0])
+    # Free road: 6 s at the ego's speed gaining 1 m/s², at most the 30 m/s limit for 6 s.
+    v = float(scene.ego_state()[4])
+    assert free == pytest.approx(min(30.0 * 6.0, v * 6.0 + 0.5 * 1.0 * 36.0), abs=1e-4)  # chord
+    assert capped < free - 20.0
