@@ -3,8 +3,8 @@
 The ego is driven by any planner SPEC through `riskmap.drive.drive_episode`; the template's
 `Scenario` supplies the initial conditions and the perception degradation through `DriveHooks`.
 Planners and environments are built once per process (evaluations run in worker processes).
-Perception parameters act on planners that read a `Scene`; the `idm` ego reads the simulator
-directly, so for it they change nothing but the scene alteration.
+Perception parameters act on planners through the `Scene` they are shown, and on the `idm` ego
+through the ghost vehicles it decides on (`adversary.perceived_idm`).
 """
 
 from __future__ import annotations

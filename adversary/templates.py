@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from adversary.perceived_idm import perceiving_idm_class
 from rasterize.errors import InputError
 from rasterize.frames import world_from_highway_env
 from rasterize.scene import HX, HY, SPEED, Scene, X, Y
@@ -187,6 +188,13 @@ def get_template(name: str) -> Template:
     return TEMPLATES[name]
 
 
+def perception_is_neutral(p: dict[str, float]) -> bool:
+    """True when the perception parameters leave what the ego perceives untouched."""
+    return (round(p["latency_steps"]) == 0 and p["position_noise_m"] == 0
+            and p["heading_noise_rad"] == 0 and p["drop_probability"] == 0
+            and p["sensing_range_m"] >= SCENE_RADIUS_M)
+
+
 class Scenario:
     """One parameter vector of one template, as the callbacks of a closed-loop episode."""
 
@@ -204,9 +212,14 @@ class Scenario:
         b = t.base
         ego_lane_index = ("0", "1", b.ego_lane)
         ego_lane = road.network.get_lane(ego_lane_index)
-        ego = IDMVehicle(road, ego_lane.position(b.ego_s_m, 0.0), ego_lane.heading_at(b.ego_s_m),
-                         b.ego_speed_mps, target_lane_index=ego_lane_index,
-                         target_speed=b.ego_speed_mps)
+        # An IDM/MOBIL ego (the `idm` planner keeps it; others take over from it) that, once
+        # perception is degraded, decides on what a degraded sensor reports.
+        neutral = perception_is_neutral(p)
+        cls = IDMVehicle if neutral else perceiving_idm_class()
+        ego = cls(road, ego_lane.position(b.ego_s_m, 0.0), ego_lane.heading_at(b.ego_s_m),
+                  b.ego_speed_mps, target_lane_index=ego_lane_index, target_speed=b.ego_speed_mps)
+        if not neutral:
+            ego.configure_perception(p, self.seed, self.dt_s)
         target_lane_index = ("0", "1", b.ego_lane + b.target_lane_offset)
         target_lane = road.network.get_lane(target_lane_index)
         s = b.ego_s_m + p["gap_m"] + 0.5 * (ego.LENGTH + ego.LENGTH)
@@ -234,11 +247,9 @@ class Scenario:
         from dataclasses import replace
 
         p = self.params
-        latency = round(p["latency_steps"])
-        neutral = (latency == 0 and p["position_noise_m"] == 0 and p["heading_noise_rad"] == 0
-                   and p["drop_probability"] == 0 and p["sensing_range_m"] >= SCENE_RADIUS_M)
-        if neutral:
+        if perception_is_neutral(p):
             return scene
+        latency = round(p["latency_steps"])
         states, valid = scene.states.copy(), scene.valid.copy()
         others = np.arange(states.shape[0]) != scene.ego_index
         if latency:
