@@ -122,7 +122,8 @@ def _check_out(out: Path, config: SearchConfig, resume: bool) -> None:
             raise InputError(f"--out {out} was searched with other settings; choose another --out")
 
 
-def search(config: SearchConfig, out: Path, resume: bool = False, progress: bool = True) -> dict:
+def search(config: SearchConfig, out: Path, resume: bool = False, progress: bool = True,
+           frames: bool = True) -> dict:
     """Run the search; returns the summary (also OUT/summary.json, with figures under OUT)."""
     from multiprocessing import get_context
 
@@ -168,4 +169,4 @@ def search(config: SearchConfig, out: Path, resume: bool = False, progress: bool
         if pool is not None:
             pool.close()
             pool.join()
-    return write_report(out)
+    return write_report(out, frames=frames)

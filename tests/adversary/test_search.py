@@ -43,7 +43,7 @@ def test_tiny_search_stores_and_resumes(tmp_path, monkeypatch, algorithm):
         raise AssertionError("a finished evaluation was driven again")
 
     monkeypatch.setattr(search_module, "evaluate", must_not_drive)
-    again = search(config, out, resume=True, progress=False)
+    again = search(config, out, resume=True, progress=False, frames=False)
     assert again["collisions_per_generation"] == summary["collisions_per_generation"]
     with pytest.raises(InputError, match="--resume"):
         search(config, out, progress=False)
@@ -58,3 +58,13 @@ def test_cli_reports_bad_input_in_one_line(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert err.startswith("adversary: error: unknown planner spec") and "\n" not in err
     assert main(["report", "--out", str(tmp_path / "none")]) == 2
+
+
+def test_cli_search_and_report_on_a_tiny_budget(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(["search", "--planner", "cv", "--template", "cut_in", "--algorithm", "random",
+                 "--pop", "2", "--gen", "1", "--episode-s", "2", "--out", str(out), "--quiet"]) == 0
+    assert "of 2 evaluations collided" in capsys.readouterr().out
+    assert len(list((out / "evaluations").glob("*.json"))) == 2
+    assert main(["report", "--out", str(out), "--no-frames"]) == 0
+    assert json.loads((out / "summary.json").read_text())["evaluations"] == 2
