@@ -1,11 +1,11 @@
 """NSGA-II versus random search: table, comparison figure and the kept figures of each run.
 
-    python experiments/search_compare.py out/search experiments/results/search
+    python experiments/search_compare.py experiments/results/search out/search [more roots...]
 
-Reads every run directory under the first argument (each written by `adversary search`, with
-its summary.json) and writes into the second: results.json, results.md, one
-collisions_<planner>_<template>.png per pair (NSGA-II and random per generation, the search
-paper's Fig. 10) and a copy of each run's figures and best-failure frames.
+Reads every run directory under the roots (each written by `adversary search`, with its
+summary.json) and writes into the first argument: results.json, results.md, one
+collisions_<planner>_<template>_<pop>x<gen>.png per pair (NSGA-II and random per generation,
+the search paper's Fig. 10) and a copy of each run's figures and three best-failure frames.
 """
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ def _fmt_range(r) -> str:
     return "–" if r is None else f"{r[0]:.2f}–{r[1]:.2f}"
 
 
-def compare(runs_root: Path, out: Path) -> list[dict]:
+def compare(roots: list[Path], out: Path) -> list[dict]:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -38,10 +38,11 @@ def compare(runs_root: Path, out: Path) -> list[dict]:
 
     out.mkdir(parents=True, exist_ok=True)
     rows = []
-    for summary_path in sorted(runs_root.glob("*/summary.json")):
+    for summary_path in sorted(p for root in roots for p in root.glob("*/summary.json")):
         s = json.loads(summary_path.read_text())
         c = s["config"]
-        rows.append({"run": summary_path.parent.name, "planner": c["planner"],
+        run = f"{summary_path.parent.name}_{c['pop']}x{c['gen']}"
+        rows.append({"run": run, "planner": c["planner"],
                      "template": c["template"], "algorithm": c["algorithm"], "pop": c["pop"],
                      "gen": c["gen"], "evaluations": s["evaluations"], "feasible": s["feasible"],
                      "collisions": s["collisions"], "collision_share": s["collision_share"],
@@ -49,14 +50,18 @@ def compare(runs_root: Path, out: Path) -> list[dict]:
                      "failure_diversity": s["failure_diversity"],
                      "collisions_per_generation": s["collisions_per_generation"],
                      "least_altered_failure": s["least_altered_failure"]})
-        run_out = out / summary_path.parent.name
+        run_out = out / run
         run_out.mkdir(exist_ok=True)
         for name in KEPT:
             shutil.copy(summary_path.parent / name, run_out / name)
-        frames = summary_path.parent / "best_failure"
-        if frames.exists():
-            shutil.copytree(frames, run_out / "best_failure", dirs_exist_ok=True)
+        frames = sorted((summary_path.parent / "best_failure").glob("frame_*.png"))
+        if frames:
+            # Kept small: the start, one second before the end, and the last step.
+            (run_out / "best_failure").mkdir(exist_ok=True)
+            for frame in {frames[0], frames[max(0, len(frames) - 2)], frames[-1]}:
+                shutil.copy(frame, run_out / "best_failure" / frame.name)
         shutil.copy(summary_path, run_out / "summary.json")
+    rows.sort(key=lambda r: (r["planner"], r["template"], r["pop"], r["algorithm"]))
     write_json(out / "results.json", rows)
 
     lines = [("| planner | template | algorithm | pop × gen | collisions / evaluations | share | "
@@ -72,26 +77,27 @@ def compare(runs_root: Path, out: Path) -> list[dict]:
             f"{'–' if best is None else format(best['alteration'], '.2f')} |")
     (out / "results.md").write_text("\n".join(lines) + "\n")
 
-    pairs = sorted({(r["planner"], r["template"]) for r in rows})
-    for planner, template in pairs:
+    pairs = sorted({(r["planner"], r["template"], r["pop"], r["gen"]) for r in rows})
+    for planner, template, pop, gen in pairs:
         fig, ax = plt.subplots(figsize=(5.5, 3.4), dpi=110)
         for r in rows:
-            if (r["planner"], r["template"]) != (planner, template):
+            if (r["planner"], r["template"], r["pop"], r["gen"]) != (planner, template, pop, gen):
                 continue
             counts = np.array(r["collisions_per_generation"])
             ax.plot(np.arange(1, len(counts) + 1), counts, "-o", ms=4,
                     label=f"{r['algorithm']} ({r['collisions']}/{r['evaluations']})")
         ax.set_xlabel("generation")
         ax.set_ylabel("collisions in the generation")
-        ax.set_title(f"{_planner_name(planner)}, {template}", fontsize=9)
+        ax.set_title(f"{_planner_name(planner)}, {template}, pop {pop} × {gen} generations",
+                     fontsize=9)
         ax.legend(fontsize=8)
         fig.tight_layout()
         name = "riskmap" if planner.startswith("riskmap") else planner
-        fig.savefig(out / f"collisions_{name}_{template}.png")
+        fig.savefig(out / f"collisions_{name}_{template}_{pop}x{gen}.png")
         plt.close(fig)
     return rows
 
 
 if __name__ == "__main__":
-    rows = compare(Path(sys.argv[1]), Path(sys.argv[2]))
-    print((Path(sys.argv[2]) / "results.md").read_text())
+    rows = compare([Path(a) for a in sys.argv[2:]], Path(sys.argv[1]))
+    print((Path(sys.argv[1]) / "results.md").read_text())
