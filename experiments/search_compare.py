@@ -5,7 +5,8 @@
 Reads every run directory under the roots (each written by `adversary search`, with its
 summary.json) and writes into the first argument: results.json, results.md, one
 collisions_<planner>_<template>_<pop>x<gen>.png per pair (NSGA-II and random per generation,
-the search paper's Fig. 10) and a copy of each run's figures and three best-failure frames.
+the search paper's Fig. 10), a copy of each run's figures, and three frames of each planner's
+least-altered failure over all runs.
 """
 
 from __future__ import annotations
@@ -54,14 +55,23 @@ def compare(roots: list[Path], out: Path) -> list[dict]:
         run_out.mkdir(exist_ok=True)
         for name in KEPT:
             shutil.copy(summary_path.parent / name, run_out / name)
-        frames = sorted((summary_path.parent / "best_failure").glob("frame_*.png"))
-        if frames:
-            # Kept small: the start, one second before the end, and the last step.
-            (run_out / "best_failure").mkdir(exist_ok=True)
-            for frame in {frames[0], frames[max(0, len(frames) - 2)], frames[-1]}:
-                shutil.copy(frame, run_out / "best_failure" / frame.name)
         shutil.copy(summary_path, run_out / "summary.json")
+        rows[-1]["path"] = summary_path.parent
     rows.sort(key=lambda r: (r["planner"], r["template"], r["pop"], r["algorithm"]))
+    # Frames of each planner's least-altered failure over all runs (kept small: the start, one
+    # second before the end, and the last step).
+    for planner in sorted({r["planner"] for r in rows}):
+        failing = [r for r in rows if r["planner"] == planner and r["least_altered_failure"]]
+        if not failing:
+            continue
+        best = min(failing, key=lambda r: r["least_altered_failure"]["alteration"])
+        frames = sorted((best["path"] / "best_failure").glob("frame_*.png"))
+        if frames:
+            (out / best["run"] / "best_failure").mkdir(exist_ok=True)
+            for frame in {frames[0], frames[max(0, len(frames) - 2)], frames[-1]}:
+                shutil.copy(frame, out / best["run"] / "best_failure" / frame.name)
+    for r in rows:
+        del r["path"]
     write_json(out / "results.json", rows)
 
     lines = [("| planner | template | algorithm | pop × gen | collisions / evaluations | share | "
