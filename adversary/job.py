@@ -132,7 +132,7 @@ def _artifact(monitor: EpisodeMonitor, recording: RecordingPlanner | None, env_i
 
 def _drive(job: Job) -> tuple[dict, bytes]:
     from adversary.solution import ego_only_solution
-    from riskmap.drive import DriveConfig, drive_episode
+    from riskmap.drive import DriveConfig, DriveHooks, drive_episode
     from riskmap.registry import HumanDriver
 
     config = DriveConfig(job.env_id, episodes=job.episode + 1, seed=job.scene_seed,
@@ -146,7 +146,7 @@ def _drive(job: Job) -> tuple[dict, bytes]:
     attack = make_attack(job.attack_name, job.attack_params, attack_seed)
     monitor = EpisodeMonitor(attack, job.safety, job.budget.control_hz)
     episode = drive_episode(env, recording or planner, config,
-                            job.episode, observer=monitor)
+                            job.episode, hooks=DriveHooks(on_reset=monitor.start, on_step=monitor.step))
     solution = None
     if episode["collided"] and monitor.collision_step is not None:
         states, valid, sizes, _ = monitor.run.recorder.arrays()

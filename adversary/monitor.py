@@ -1,4 +1,5 @@
-"""Per-episode measurements of a stress-test job, taken through drive_episode's observer hooks.
+"""Per-episode measurements of a stress-test job, taken through drive_episode's hooks
+(`DriveHooks.on_reset`, `.on_step`).
 
 Definitions (STRIVE's metrics as CRASH uses them, adapted to highway-env):
 

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from riskmap.atomic import write_json
-from riskmap.drive import DriveConfig, drive_episode
+from riskmap.drive import DriveConfig, DriveHooks, drive_episode
 from riskmap.episode import make_env
 from riskmap.guard.aggressors import AggressorHook
 from riskmap.registry import make_planner
@@ -53,7 +53,7 @@ def run_cell(out: Path, env_id: str, scene: str, inner: str, variant: str, episo
         if path.exists():
             continue
         hooks = (AggressorHook(),) if scene == "aggressive" else ()
-        record = drive_episode(env, planner, config, episode, hooks=hooks)
+        record = drive_episode(env, planner, config, episode, hooks=DriveHooks(on_ready=hooks))
         guard = getattr(planner, "guard", None)
         record.update({"spec": spec + (f" (alert threshold {threshold})" if threshold else ""), "scene": scene, "variant": variant, "inner": inner,
                        "aggressor": bool(hooks and hooks[0].aggressor is not None)})

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -56,16 +57,32 @@ def _min_gap(road, ego, radius: float) -> float:
     return min(gaps, default=float("inf"))
 
 
+@dataclass(frozen=True)
+class DriveHooks:
+    """Optional callbacks into one closed-loop episode; the defaults drive it unchanged.
+
+    setup(base_env): rearrange the road before the first record (initial conditions).
+    on_reset(run): once the `Episode` is reset, before the ego is handed to the planner.
+    on_ready: callables run with the `Episode` once the ego is set up (after the planner's own
+        `attach(run)`, if it has one), e.g. to script other traffic.
+    perceive(scene, step) -> scene: what the planner is shown instead of the recorded scene
+        (perception degradation); frames still show the recorded scene.
+    on_step(run): after every control step (measurements, trajectory logging).
+    """
+
+    setup: Callable | None = None
+    on_reset: Callable | None = None
+    on_ready: tuple = ()
+    perceive: Callable | None = None
+    on_step: Callable | None = None
+
+
 def drive_episode(env, planner, config: DriveConfig, episode: int, frames_dir: Path | None = None,
-                  observer=None, hooks: tuple = ()) -> dict:
-    """Drive one episode. `observer` (optional) gets `start(run)` once the episode is reset, before
-    the ego is handed to the planner, and `step(run)` after every simulation step: the hook through
-    which a scenario is perturbed and extra metrics are measured. `hooks`: callables run with the
-    `Episode` once the ego is set up (after the planner's own `attach(run)`, if it has one), e.g.
-    to script other traffic."""
-    run = Episode(env, config.env_id, config.seed, episode, config.control_hz)
-    if observer is not None:
-        observer.start(run)
+                  hooks: DriveHooks = DriveHooks()) -> dict:
+    """Drive one closed-loop episode; `hooks` perturb or observe it (see `DriveHooks`)."""
+    run = Episode(env, config.env_id, config.seed, episode, config.control_hz, setup=hooks.setup)
+    if hooks.on_reset is not None:
+        hooks.on_reset(run)
     human = isinstance(planner, HumanDriver)
     controller = TrackingController(ControllerConfig())
     plan_times, gaps, speeds = [], [], []
@@ -76,7 +93,7 @@ def drive_episode(env, planner, config: DriveConfig, episode: int, frames_dir: P
         planner.reset(run.recorder.scene(0, config.history_s, 0.0))
     if hasattr(planner, "attach"):
         planner.attach(run)
-    for hook in hooks:
+    for hook in hooks.on_ready:
         hook(run)
     distance = 0.0
     n_steps = int(round(config.episode_s * config.control_hz))
@@ -86,8 +103,9 @@ def drive_episode(env, planner, config: DriveConfig, episode: int, frames_dir: P
             if k % replan_every == 0:
                 scene = run.recorder.scene(run.recorder.num_steps - 1, config.history_s, 0.0,
                                            source=config.env_id)
+                seen = scene if hooks.perceive is None else hooks.perceive(scene, k)
                 started = time.perf_counter()
-                plan = check_plan(planner.plan(scene), type(planner).__name__)
+                plan = check_plan(planner.plan(seen), type(planner).__name__)
                 plan_times.append(time.perf_counter() - started)
                 origin, heading = ego_pose(scene)
                 controller.set_plan(plan.waypoints, origin, heading)
@@ -105,11 +123,11 @@ def drive_episode(env, planner, config: DriveConfig, episode: int, frames_dir: P
             since_plan += run.dt
         before = ego.position.copy()
         run.step()
-        if observer is not None:
-            observer.step(run)
         distance += float(np.linalg.norm(run.ego.position - before))
         speeds.append(float(run.ego.speed))
         gaps.append(_min_gap(run.base.road, run.ego, config.gap_radius_m))
+        if hooks.on_step is not None:
+            hooks.on_step(run)
         if run.done:
             break
     return {

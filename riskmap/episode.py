@@ -143,7 +143,10 @@ class Episode:
     family has a spawner, new traffic arrives. `done` once the ego crashed or left the network.
     """
 
-    def __init__(self, env, env_id: str, seed: int, episode: int, rate_hz: int = 10):
+    def __init__(self, env, env_id: str, seed: int, episode: int, rate_hz: int = 10,
+                 setup=None):
+        """`setup(base_env)`, if given, rearranges the road after the human ego is installed and
+        before anything is recorded (scenario templates set their initial conditions there)."""
         from rasterize.highway import TrafficRecorder
 
         self.env, self.base = env, env.unwrapped
@@ -153,6 +156,8 @@ class Episode:
         env.reset(seed=self.seed)
         rng = np.random.default_rng([seed, episode, 1])
         self.driver = _install_human_ego(self.base, rng, self.setup)
+        if setup is not None:
+            setup(self.base)
         self.rate_hz, self.dt = rate_hz, 1.0 / rate_hz
         self.recorder = TrafficRecorder(self.base.road, self.ego, self.dt)
         self.recorder.record()

@@ -142,14 +142,14 @@ class _KeepRun:
 
 
 def run_job(job: Job, config: GuardCollectConfig, env, planner) -> tuple[dict, dict]:
-    from riskmap.drive import DriveConfig, drive_episode
+    from riskmap.drive import DriveConfig, DriveHooks, drive_episode
     from riskmap.guard.aggressors import AggressorHook
 
     keep = _KeepRun()
     hooks = (keep, AggressorHook()) if job.aggressive else (keep,)
     drive_config = DriveConfig(job.env_id, job.episode + 1, seed=job.seed, control_hz=config.control_hz,
                                episode_s=config.episode_s)
-    record = drive_episode(env, planner, drive_config, job.episode, hooks=hooks)
+    record = drive_episode(env, planner, drive_config, job.episode, hooks=DriveHooks(on_ready=hooks))
     states, valid, sizes, kinds = keep.run.recorder.arrays()
     # The recorder's state rows also count vehicle objects that continue another agent's record
     # (the ego handed to a planner, an aggressor); agent ids index the first len(sizes) rows.

@@ -5,7 +5,7 @@ import pytest
 pytest.importorskip("agentspeak")
 
 from riskmap.baselines import ConstantVelocityPlanner
-from riskmap.drive import DriveConfig, drive_episode
+from riskmap.drive import DriveConfig, DriveHooks, drive_episode
 from riskmap.episode import make_env
 from riskmap.guard.aggressors import AggressorHook
 from riskmap.guard.guarded import GuardConfig, GuardedHumanDriver, GuardedPlanner
@@ -46,7 +46,7 @@ def test_guard_takes_over_every_frame_and_slows_the_ego(env, kind):
 @pytest.mark.slow
 def test_aggressor_hook_installs_a_scripted_neighbour(env):
     hook = AggressorHook()
-    drive_episode(env, HumanDriver(), DriveConfig("highway-v0", 1, seed=0, episode_s=1.0), 0, hooks=(hook,))
+    drive_episode(env, HumanDriver(), DriveConfig("highway-v0", 1, seed=0, episode_s=1.0), 0, hooks=DriveHooks(on_ready=(hook,)))
     assert hook.aggressor is not None
     assert hook.aggressor.TIME_WANTED == hook.config.time_gap_s
     assert hook.aggressor.phase in ("approach", "cut_in", "brake", "done")

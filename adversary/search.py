@@ -1,0 +1,172 @@
+"""`adversary search`: black-box search for scenario conditions that make the ego collide.
+
+NSGA-II (pymoo) over a template's parameter vector, each candidate evaluated in closed loop in
+highway-env with the ego driven by a planner SPEC; random search with the same budget (pymoo's
+random sampling, one batch of `pop` per generation) is the baseline. Objectives, the collision
+flag and the braking-distance constraint are those of `adversary.objectives` (see its docstring
+for how the flag is made well defined for NSGA-II).
+
+Storage, under OUT:
+    run.json                      the resolved configuration and provenance
+    evaluations/<key>.json        one per evaluated parameter vector, written atomically as
+                                  soon as it finishes; key = hash of the exact float64 vector
+    generations/gen_NNN.json      the keys evaluated in generation NNN, written when it ends
+Resume: the algorithms are seeded, so a rerun asks for exactly the same vectors; every vector
+whose evaluation file exists is read back instead of being driven again.
+
+Parallel evaluation: pymoo's elementwise runner over a process pool (`--workers K`); each worker
+builds its planner and env once.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+from pymoo.core.problem import ElementwiseProblem
+
+from adversary.evaluate import EvaluationConfig, constraint_value, evaluate
+from adversary.templates import Template, get_template
+from rasterize.errors import InputError
+from riskmap.atomic import write_json
+from riskmap.provenance import provenance
+
+ALGORITHMS = ("nsga2", "random")
+
+
+@dataclass(frozen=True)
+class SearchConfig:
+    planner: str
+    template: str
+    algorithm: str = "nsga2"
+    pop: int = 20                   # evaluations per generation
+    gen: int = 10                   # generations; the budget is pop × gen evaluations
+    seed: int = 0
+    episode_s: float = 10.0         # simulated seconds per evaluation
+    workers: int = 1                # evaluation processes
+
+    def __post_init__(self) -> None:
+        if self.algorithm not in ALGORITHMS:
+            raise InputError(f"--algorithm {self.algorithm!r}: use one of {', '.join(ALGORITHMS)}")
+        if self.pop < 2 or self.gen < 1:
+            raise InputError(f"--pop must be ≥ 2 and --gen ≥ 1, got {self.pop} and {self.gen}")
+        if self.workers < 1:
+            raise InputError(f"--workers must be ≥ 1, got {self.workers}")
+        get_template(self.template)
+
+    @property
+    def evaluation(self) -> EvaluationConfig:
+        return EvaluationConfig(self.planner, self.template, self.seed, self.episode_s)
+
+
+def evaluation_key(x: np.ndarray) -> str:
+    """Stable name of one exact parameter vector."""
+    return hashlib.sha1(np.asarray(x, dtype=np.float64).tobytes()).hexdigest()[:16]
+
+
+class ScenarioProblem(ElementwiseProblem):
+    """n_var = template parameters, F [3] (objectives module), G [1] braking constraint.
+
+    An evaluation already stored under `store` is read back instead of being driven again.
+    """
+
+    def __init__(self, template: Template, config: EvaluationConfig, store: Path, **kwargs):
+        super().__init__(n_var=len(template.parameters), n_obj=3, n_ieq_constr=1,
+                         xl=template.lower, xu=template.upper, **kwargs)
+        self.template, self.config, self.store = template, config, Path(store)
+
+    def _evaluate(self, x, out, *args, **kwargs):
+        path = self.store / f"{evaluation_key(x)}.json"
+        if path.exists():
+            record = json.loads(path.read_text())
+        else:
+            record = evaluate(self.template, x, self.config)
+            write_json(path, record)
+        out["F"] = np.asarray(record["F"])
+        out["G"] = np.array([record["G"]])
+
+
+def _worker_init() -> None:
+    import torch
+
+    torch.set_num_threads(1)      # one core per evaluation process
+
+
+def _random_batch(problem, n: int, rng: np.random.Generator, template: Template) -> np.ndarray:
+    """`n` vectors from pymoo's uniform random sampling that satisfy the constraint (rejection),
+    so that the baseline spends its whole budget on scenes solvable in principle."""
+    from pymoo.operators.sampling.rnd import FloatRandomSampling
+
+    sampling, kept = FloatRandomSampling(), []
+    for _ in range(1000):
+        pop = sampling.do(problem, n, random_state=rng)
+        kept.extend(x for x in pop.get("X") if constraint_value(template, x) <= 0)
+        if len(kept) >= n:
+            return np.asarray(kept[:n])
+    raise InputError(f"template {template.name}: random sampling found no feasible vector")
+
+
+def _check_out(out: Path, config: SearchConfig, resume: bool) -> None:
+    evaluations = out / "evaluations"
+    if evaluations.exists() and any(evaluations.iterdir()) and not resume:
+        raise InputError(f"--out {out} already holds evaluations; pass --resume to continue or "
+                         "choose another --out")
+    if resume and (out / "run.json").exists():
+        previous = json.loads((out / "run.json").read_text())["config"]
+        same = {k: v for k, v in previous.items() if k != "workers"} == \
+            {k: v for k, v in asdict(config).items() if k != "workers"}
+        if not same:
+            raise InputError(f"--out {out} was searched with other settings; choose another --out")
+
+
+def search(config: SearchConfig, out: Path, resume: bool = False, progress: bool = True,
+           frames: bool = True) -> dict:
+    """Run the search; returns the summary (also OUT/summary.json, with figures under OUT)."""
+    from multiprocessing import get_context
+
+    from pymoo.algorithms.moo.nsga2 import NSGA2
+    from pymoo.core.evaluator import Evaluator
+    from pymoo.core.population import Population
+    from pymoo.parallelization.starmap import StarmapParallelization
+    from tqdm import tqdm
+
+    from adversary.search_report import write_report
+
+    out = Path(out)
+    _check_out(out, config, resume)
+    write_json(out / "run.json", {"config": asdict(config), **provenance()})
+    template = get_template(config.template)
+    pool = None
+    kwargs = {}
+    if config.workers > 1:
+        pool = get_context("spawn").Pool(config.workers, initializer=_worker_init)
+        kwargs["elementwise_runner"] = StarmapParallelization(pool.starmap)
+    else:
+        _worker_init()
+    problem = ScenarioProblem(template, config.evaluation, out / "evaluations", **kwargs)
+    evaluator = Evaluator()
+    rng = np.random.default_rng(config.seed)
+    if config.algorithm == "nsga2":
+        algorithm = NSGA2(pop_size=config.pop, eliminate_duplicates=True)
+        algorithm.setup(problem, termination=("n_gen", config.gen), seed=config.seed)
+    try:
+        for generation in tqdm(range(config.gen), disable=not progress,
+                               desc=f"{config.algorithm} {config.planner} {config.template}"):
+            if config.algorithm == "nsga2":
+                batch = algorithm.ask()
+            else:
+                batch = Population.new("X", _random_batch(problem, config.pop, rng, template))
+            evaluator.eval(problem, batch)
+            if config.algorithm == "nsga2":
+                algorithm.tell(infills=batch)
+            keys = [evaluation_key(x) for x in batch.get("X")]
+            write_json(out / "generations" / f"gen_{generation:03d}.json",
+                       {"generation": generation, "keys": keys})
+    finally:
+        if pool is not None:
+            pool.close()
+            pool.join()
+    return write_report(out, frames=frames)
