@@ -37,23 +37,32 @@ def run_local(jobs: list[Job], workers: int) -> Iterator[tuple[Job, dict]]:
                 future.cancel()
 
 
-def run_ray(jobs: list[Job], workers: int, address: str | None) -> Iterator[tuple[Job, dict]]:
+def init_ray(workers: int, address: str | None) -> bool:
+    """Connect to the Ray cluster at `address`, or start a local one with `workers` CPUs, unless
+    Ray is already initialised; True when this call started it (and should shut it down)."""
     try:
         import ray
     except ImportError:
         raise InputError("--backend ray needs Ray: pip install 'riskmap-toolkit[ray]'") from None
     from riskmap.provenance import PACKAGE_ROOT
 
-    started_here = not ray.is_initialized()
-    if started_here:
-        # Workers import this source tree, not whatever copy another path would give them; on a
-        # cluster the toolkit must be installed on every node (or shipped with a working_dir).
-        runtime_env = {"env_vars": {"PYTHONPATH": str(PACKAGE_ROOT), "OMP_NUM_THREADS": "1"}}
-        if address:
-            ray.init(address=address, runtime_env=runtime_env, log_to_driver=False)
-        else:
-            ray.init(num_cpus=max(1, workers), include_dashboard=False, log_to_driver=False,
-                     runtime_env=runtime_env)
+    if ray.is_initialized():
+        return False
+    # Workers import this source tree, not whatever copy another path would give them; on a
+    # cluster the toolkit must be installed on every node (or shipped with a working_dir).
+    runtime_env = {"env_vars": {"PYTHONPATH": str(PACKAGE_ROOT), "OMP_NUM_THREADS": "1"}}
+    if address:
+        ray.init(address=address, runtime_env=runtime_env, log_to_driver=False)
+    else:
+        ray.init(num_cpus=max(1, workers), include_dashboard=False, log_to_driver=False,
+                 runtime_env=runtime_env)
+    return True
+
+
+def run_ray(jobs: list[Job], workers: int, address: str | None) -> Iterator[tuple[Job, dict]]:
+    started_here = init_ray(workers, address)
+    import ray
+
     remote = ray.remote(num_cpus=1)(run_job)
     pending = {remote.remote(job): job for job in jobs}
     try:

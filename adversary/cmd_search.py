@@ -34,8 +34,8 @@ def _run_search(args: argparse.Namespace) -> int:
     config = SearchConfig(planner=args.planner, template=args.template, algorithm=args.algorithm,
                           pop=args.pop, gen=args.gen, seed=args.seed, episode_s=args.episode_s,
                           workers=args.workers)
-    _print_summary(search(config, Path(args.out), resume=args.resume, progress=not args.quiet),
-                   args.out)
+    _print_summary(search(config, Path(args.out), resume=args.resume, progress=not args.quiet,
+                          backend=args.backend, address=args.address), args.out)
     return 0
 
 
@@ -62,6 +62,9 @@ def add_parsers(subparsers) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--episode-s", type=float, default=10.0, help="simulated seconds per evaluation")
     p.add_argument("--workers", type=_positive_int, default=1, help="evaluation processes")
+    p.add_argument("--backend", default="local", choices=("local", "ray"),
+                   help="local process pool, or Ray tasks (pip install 'riskmap-toolkit[ray]')")
+    p.add_argument("--address", default=None, help="Ray cluster address (default: a local Ray)")
     p.add_argument("--out", required=True, help="directory for evaluations, summary and figures")
     p.add_argument("--resume", action="store_true", help="continue a run in --out")
     p.add_argument("--quiet", action="store_true")

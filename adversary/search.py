@@ -14,8 +14,8 @@ Storage, under OUT:
 Resume: the algorithms are seeded, so a rerun asks for exactly the same vectors; every vector
 whose evaluation file exists is read back instead of being driven again.
 
-Parallel evaluation: pymoo's elementwise runner over a process pool (`--workers K`); each worker
-builds its planner and env once.
+Parallel evaluation: pymoo's elementwise runner over a process pool (`--workers K`), or over Ray
+tasks (`--backend ray [--address ADDR]`); each worker builds its planner and env once.
 """
 
 from __future__ import annotations
@@ -122,9 +122,27 @@ def _check_out(out: Path, config: SearchConfig, resume: bool) -> None:
             raise InputError(f"--out {out} was searched with other settings; choose another --out")
 
 
+def _ray_call(function, args):
+    _worker_init()
+    return function(*args)
+
+
+def _ray_starmap():
+    """A `starmap(f, iterable)` that runs each call as a Ray task (one CPU each), in order."""
+    import ray
+
+    remote = ray.remote(num_cpus=1)(_ray_call)
+    return lambda function, iterable: ray.get([remote.remote(function, args) for args in iterable])
+
+
 def search(config: SearchConfig, out: Path, resume: bool = False, progress: bool = True,
-           frames: bool = True) -> dict:
-    """Run the search; returns the summary (also OUT/summary.json, with figures under OUT)."""
+           frames: bool = True, backend: str = "local", address: str | None = None) -> dict:
+    """Run the search; returns the summary (also OUT/summary.json, with figures under OUT).
+
+    backend "local": a process pool of `config.workers` (none for 1); "ray": Ray tasks on the
+    cluster at `address` or on a local Ray instance. Results do not depend on the backend."""
+    if backend not in ("local", "ray"):
+        raise InputError(f"--backend must be local or ray, got {backend!r}")
     from multiprocessing import get_context
 
     from pymoo.algorithms.moo.nsga2 import NSGA2
@@ -140,8 +158,14 @@ def search(config: SearchConfig, out: Path, resume: bool = False, progress: bool
     write_json(out / "run.json", {"config": asdict(config), **provenance()})
     template = get_template(config.template)
     pool = None
+    ray_started = False
     kwargs = {}
-    if config.workers > 1:
+    if backend == "ray":
+        from adversary.backends import init_ray
+
+        ray_started = init_ray(config.workers, address)
+        kwargs["elementwise_runner"] = StarmapParallelization(_ray_starmap())
+    elif config.workers > 1:
         pool = get_context("spawn").Pool(config.workers, initializer=_worker_init)
         kwargs["elementwise_runner"] = StarmapParallelization(pool.starmap)
     else:
@@ -169,4 +193,8 @@ def search(config: SearchConfig, out: Path, resume: bool = False, progress: bool
         if pool is not None:
             pool.close()
             pool.join()
+        if ray_started:
+            import ray
+
+            ray.shutdown()
     return write_report(out, frames=frames)

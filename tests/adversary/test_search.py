@@ -68,3 +68,20 @@ def test_cli_search_and_report_on_a_tiny_budget(tmp_path, capsys):
     assert len(list((out / "evaluations").glob("*.json"))) == 2
     assert main(["search-report", "--out", str(out), "--no-frames"]) == 0
     assert json.loads((out / "summary.json").read_text())["evaluations"] == 2
+
+
+@pytest.mark.slow
+def test_search_on_local_ray_gives_the_same_evaluations_as_local(tmp_path):
+    pytest.importorskip("ray")
+    config = SearchConfig(planner="cv", template="cut_in", algorithm="nsga2", pop=4, gen=2,
+                          episode_s=3.0, workers=2)
+    local = search(config, tmp_path / "local", progress=False, frames=False)
+    on_ray = search(config, tmp_path / "ray", progress=False, frames=False, backend="ray")
+
+    def evaluations(out):
+        return {p.stem: json.loads(p.read_text())["F"] for p in (out / "evaluations").glob("*.json")}
+
+    assert evaluations(tmp_path / "ray") == evaluations(tmp_path / "local")
+    assert on_ray["collisions_per_generation"] == local["collisions_per_generation"]
+    with pytest.raises(InputError, match="--backend"):
+        search(config, tmp_path / "bad", progress=False, backend="cluster")
