@@ -70,6 +70,19 @@ def _cmd_drive(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_train_baseline(args: argparse.Namespace) -> int:
+    from riskmap.train_baseline import BaselineTrainConfig, train_baseline
+
+    config = BaselineTrainConfig(kind=args.kind, data=args.data, out=args.out, epochs=args.epochs,
+                                 batch_size=args.batch_size, lr=args.lr,
+                                 history_frames=args.history_frames, seed=args.seed,
+                                 max_windows=args.max_windows)
+    best = train_baseline(config, resume=args.resume, progress=not args.quiet)
+    print(f"best epoch {best.get('epoch')}: val ADE {best['val_ade_m']:.2f} m; "
+          f"checkpoint {Path(args.out) / 'best.safetensors'}")
+    return 0
+
+
 def _cmd_figures_plans(args: argparse.Namespace) -> int:
     from riskmap.figures import plan_figures
 
@@ -118,6 +131,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--resume", action="store_true", help="continue an interrupted run exactly")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=_cmd_train)
+
+    p = sub.add_parser("train-baseline", help="train a behaviour-cloning baseline (cnn, cnn_lstm, rvsg)")
+    p.add_argument("kind", choices=("cnn", "cnn_lstm", "cnn-lstm", "rvsg"))
+    p.add_argument("--data", required=True, help="dataset directory (from riskmap collect)")
+    p.add_argument("--out", required=True, help="run directory")
+    p.add_argument("--epochs", type=_positive_int, default=4)
+    p.add_argument("--batch-size", type=_positive_int, default=32)
+    p.add_argument("--lr", type=float, default=3e-4)
+    p.add_argument("--history-frames", type=_positive_int, default=4,
+                   help="cnn_lstm: raster frames 0.5 s apart fed to the LSTM")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--max-windows", type=_positive_int, default=None,
+                   help="use at most this many training windows (quick runs)")
+    p.add_argument("--resume", action="store_true", help="continue an interrupted run exactly")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=_cmd_train_baseline)
 
     p = sub.add_parser("drive", help="drive closed-loop episodes with a planner")
     p.add_argument("--checkpoint", help="risk-map planner checkpoint (same as --planner riskmap:CKPT)")
