@@ -83,6 +83,18 @@ def _cmd_train_baseline(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_evaluate(args: argparse.Namespace) -> int:
+    from riskmap.evaluate import EvalConfig, evaluate
+
+    planners = tuple(p.strip() for p in args.planners.split(",") if p.strip())
+    config = EvalConfig(env_id=args.env, planners=planners, episodes=args.episodes, seed=args.seed,
+                        mode=args.mode, episode_s=args.episode_s)
+    evaluate(config, Path(args.out), workers=args.workers, resume=args.resume,
+             progress=not args.quiet)
+    print((Path(args.out) / "table.md").read_text(), end="")
+    return 0
+
+
 def _cmd_figures_plans(args: argparse.Namespace) -> int:
     from riskmap.figures import plan_figures
 
@@ -159,6 +171,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--resume", action="store_true")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=_cmd_drive)
+
+    p = sub.add_parser("evaluate", help="closed-loop benchmark of planners (Table I metrics)")
+    p.add_argument("--planners", required=True,
+                   help="comma-separated planner SPECs: idm, replay, cv, riskmap:PATH, cnn:PATH, "
+                        "cnn_lstm:PATH, rvsg:PATH")
+    p.add_argument("--env", required=True)
+    p.add_argument("--episodes", type=_positive_int, required=True)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--mode", choices=("log", "reactive"), default="log",
+                   help="log: other vehicles replay the human's record; reactive: IDM/MOBIL traffic")
+    p.add_argument("--episode-s", type=float, default=None,
+                   help="simulated seconds per episode (default: the family's length)")
+    p.add_argument("--out", required=True)
+    p.add_argument("--workers", type=_positive_int, default=1, help="processes (default 1)")
+    p.add_argument("--resume", action="store_true")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=_cmd_evaluate)
 
     p = sub.add_parser("figures", help="export PNG figures")
     fig_sub = p.add_subparsers(dest="figure", required=True)

@@ -56,9 +56,12 @@ def _min_gap(road, ego, radius: float) -> float:
     return min(gaps, default=float("inf"))
 
 
-def drive_episode(env, planner, config: DriveConfig, episode: int, frames_dir: Path | None = None
-                  ) -> dict:
-    run = Episode(env, config.env_id, config.seed, episode, config.control_hz)
+def drive_episode(env, planner, config: DriveConfig, episode: int, frames_dir: Path | None = None,
+                  run: Episode | None = None) -> dict:
+    """Drive one episode; `run`: an already reset Episode to drive instead of a fresh one (for
+    instance one whose traffic replays a log); the caller can read its recorder afterwards."""
+    if run is None:
+        run = Episode(env, config.env_id, config.seed, episode, config.control_hz)
     human = isinstance(planner, HumanDriver)
     controller = TrackingController(ControllerConfig())
     plan_times, gaps, speeds = [], [], []
@@ -108,6 +111,7 @@ def drive_episode(env, planner, config: DriveConfig, episode: int, frames_dir: P
         "min_gap_m": float(min(gaps)) if gaps else float("inf"),
         "plan_ms_median": 1000 * float(np.median(plan_times)) if plan_times else None,
         "plan_ms_mean": 1000 * float(np.mean(plan_times)) if plan_times else None,
+        "plan_ms_p90": 1000 * float(np.percentile(plan_times, 90)) if plan_times else None,
         "plan_calls": len(plan_times),
     }
 

@@ -3,13 +3,16 @@
     idm              the IDM/MOBIL "human": the ego drives itself, no plan is made
     cv               constant velocity: current speed and heading for 6 s
     riskmap:PATH     the risk-map planner from a checkpoint (PATH with or without .safetensors)
+    replay           log playback of the human's recorded trajectory (needs a recorded episode)
+    cnn:PATH, cnn_lstm:PATH (or cnn-lstm:PATH), rvsg:PATH
+                     behaviour-cloning baselines from `riskmap train-baseline` checkpoints
 """
 
 from __future__ import annotations
 
 from rasterize.errors import InputError
 
-SPECS = ("idm", "cv", "riskmap:PATH")
+SPECS = ("idm", "cv", "replay", "riskmap:PATH", "cnn:PATH", "cnn_lstm:PATH", "rvsg:PATH")
 
 
 class HumanDriver:
@@ -31,4 +34,12 @@ def make_planner(spec: str, seed: int = 0):
         from riskmap.planner import RiskMapPlanner
 
         return RiskMapPlanner.load(arg, seed=seed)
+    if kind == "replay" and not arg:
+        from riskmap.log_replay import ReplayPlanner
+
+        return ReplayPlanner()
+    if kind in ("cnn", "cnn_lstm", "cnn-lstm", "rvsg") and arg:
+        from riskmap.bc import BCPlanner
+
+        return BCPlanner.load(arg, expected_kind=kind)
     raise InputError(f"unknown planner spec {spec!r}; use one of {', '.join(SPECS)}")
