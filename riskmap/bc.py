@@ -4,6 +4,7 @@ All three share the risk-map generator's raster backbone (ResNet-34 stem + layer
 `riskmap.model`) and regress the 12 future waypoints directly:
 
     cnn       raster [B, C, H, W]                 ─ backbone ─ pool ─ MLP (+ speed) ─► [B, 12, 2]
+              (the head's output is added to the constant-velocity rollout at the ego's speed)
     cnn_lstm  rasters of the last K frames [B, K, C, H, W], each through the backbone and MLP,
               an LSTM over the K frame features ─ last hidden state ─► [B, 12, 2]
     rvsg      raster plus the goal map as one more channel [B, C + 1, H, W] ─ as cnn ─► [B, 12, 2]
@@ -30,7 +31,7 @@ from rasterize.maps import goal_map, route_goal_cell
 from rasterize.raster import rasterize_scene
 from rasterize.scene import Scene
 from riskmap.model import ModelConfig, RiskMapGenerator
-from riskmap.planner import PLAN_STEPS, Plan
+from riskmap.planner import PLAN_DT_S, PLAN_STEPS, Plan
 
 BC_KINDS = ("cnn", "cnn_lstm", "rvsg")
 CHECKPOINT_KIND = "bc"
@@ -102,7 +103,11 @@ class BCNet(nn.Module):
         features = features.view(b, k, -1)
         if self.lstm is not None:
             features = self.lstm(features)[0]
-        return self.head(features[:, -1]).view(b, PLAN_STEPS, 2) * WAYPOINT_SCALE_M
+        offset = self.head(features[:, -1]).view(b, PLAN_STEPS, 2) * WAYPOINT_SCALE_M
+        # The head learns the departure from constant velocity (straight ahead at the present
+        # speed), so that the few epochs a CPU affords start from a sensible plan.
+        along = speed[:, -1:] * (PLAN_DT_S * torch.arange(1, PLAN_STEPS + 1, dtype=speed.dtype))
+        return offset + torch.stack([along, torch.zeros_like(along)], dim=-1)
 
 
 def _frame_scenes(scene: Scene, frames: int) -> list[Scene]:

@@ -47,6 +47,9 @@ MODES = ("log", "reactive")
 # Per-episode values summarised as mean and 90th percentile over episodes.
 METRICS = ("safety_pct", "ade_m", "goal_error_m", "progress_m", "jerk_mps3", "plan_ms_mean")
 RATES = ("collided", "off_road")
+CSV_FIELDS = ("planner", "label", "episode", "mode", "collided", "off_road", "safety_pct", "dangerous",
+              "encounters", "ade_m", "goal_error_m", "progress_m", "jerk_mps3", "simulated_s",
+              "plan_ms_mean", "plan_ms_p90", "plan_calls")
 
 
 @dataclass(frozen=True)
@@ -286,8 +289,7 @@ def evaluate(config: EvalConfig, out: Path, workers: int = 1, resume: bool = Fal
     bar.close()
     records = [json.loads(_result_path(out, s, e).read_text())
                for s in config.planners for e in range(config.episodes)]
-    fields = list(records[0].keys())
-    atomic_write(out / "episodes.csv", lambda f: f.write(_csv_text(fields, records).encode()))
+    atomic_write(out / "episodes.csv", lambda f: f.write(_csv_text(list(CSV_FIELDS), records).encode()))
     table = summarise(config, records)
     results = {**meta, "planners": table}
     write_json(out / "results.json", results)
