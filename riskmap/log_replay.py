@@ -113,6 +113,10 @@ def replay_vehicle_class():
             pass                                  # a replayed ego ignores the planner's commands
 
         def step(self, dt: float) -> None:
+            if self.impact is not None:
+                # highway-env registers a crash found one step ahead (an "impact") when the
+                # vehicle next moves; the recorded human's crash was registered that way too.
+                self.crashed, self.impact = True, None
             self.set_step(self.clock.next_step)
 
         def predict_trajectory_constant_speed(self, times: np.ndarray):
