@@ -30,10 +30,15 @@ class SafetyConfig:
 
 
 def ade_m(ego_xy: np.ndarray, human_xy: np.ndarray) -> float:
-    """Mean distance between the two trajectories at equal times, over the steps both have."""
-    n = min(len(ego_xy), len(human_xy))
-    return float(np.linalg.norm(np.asarray(ego_xy[:n], float) - np.asarray(human_xy[:n], float),
-                                axis=1).mean())
+    """Mean distance between the two trajectories at equal times, over the human's steps.
+
+    An ego trajectory that ended early (the ego crashed or left the road, which ends the episode)
+    stays at its last position for the rest: leaving early must not shorten the comparison.
+    """
+    ego_xy, human_xy = np.asarray(ego_xy, float), np.asarray(human_xy, float)
+    if len(ego_xy) < len(human_xy):
+        ego_xy = np.concatenate([ego_xy, np.repeat(ego_xy[-1:], len(human_xy) - len(ego_xy), axis=0)])
+    return float(np.linalg.norm(ego_xy[: len(human_xy)] - human_xy, axis=1).mean())
 
 
 def goal_error_m(ego_xy: np.ndarray, human_xy: np.ndarray) -> float:

@@ -22,13 +22,21 @@ def _states(xy: np.ndarray, heading: float, speed: float) -> np.ndarray:
 
 def test_ade_and_goal_error_against_a_float64_loop():
     rng = np.random.default_rng(0)
-    ego = rng.normal(size=(7, 2)) * 10
-    human = rng.normal(size=(9, 2)) * 10     # longer: only the 7 common steps count for ADE
+    ego = rng.normal(size=(9, 2)) * 10
+    human = rng.normal(size=(9, 2)) * 10
     expected = sum(((ego[i, 0] - human[i, 0]) ** 2 + (ego[i, 1] - human[i, 1]) ** 2) ** 0.5
-                   for i in range(7)) / 7
+                   for i in range(9)) / 9
     assert ade_m(ego, human) == pytest.approx(expected, rel=1e-12)
     assert goal_error_m(ego, human) == pytest.approx(np.hypot(*(ego[-1] - human[-1])), rel=1e-12)
     assert ade_m(human, human) == 0.0
+
+
+def test_an_ego_that_stopped_early_stays_where_it_ended():
+    human = np.column_stack([np.arange(5.0) * 10, np.zeros(5)])      # 0, 10, ..., 40 m
+    ego = human[:2]                                                  # ended at 10 m after 1 step
+    assert ade_m(ego, human) == pytest.approx((0 + 0 + 10 + 20 + 30) / 5)
+    assert goal_error_m(ego, human) == pytest.approx(30.0)
+    assert ade_m(np.vstack([human, [[50.0, 0.0]]]), human) == 0.0     # extra ego steps do not count
 
 
 def test_path_length_and_jerk_closed_form():
