@@ -17,16 +17,20 @@ from riskmap.provenance import provenance
 CHECKPOINT_KIND = "riskmap"
 
 
-def save_checkpoint(path: Path, model: torch.nn.Module, sidecar: dict) -> Path:
-    """Write `path` (.safetensors) and `path.with_suffix('.json')`, each atomically."""
+def save_checkpoint(path: Path, model: torch.nn.Module, sidecar: dict,
+                    kind: str = CHECKPOINT_KIND) -> Path:
+    """Write `path` (.safetensors) and `path.with_suffix('.json')`, each atomically.
+
+    `kind` tags the sidecar so that a loader refuses weights of another model family.
+    """
     path = Path(path).with_suffix(".safetensors")
     state = {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}
     atomic_write(path, lambda f: f.write(save(state)))
-    write_json(path.with_suffix(".json"), {"kind": CHECKPOINT_KIND, **provenance(), **sidecar})
+    write_json(path.with_suffix(".json"), {"kind": kind, **provenance(), **sidecar})
     return path
 
 
-def read_sidecar(path: Path) -> dict:
+def read_sidecar(path: Path, kind: str = CHECKPOINT_KIND) -> dict:
     path = Path(path)
     weights = path.with_suffix(".safetensors")
     sidecar = path.with_suffix(".json")
@@ -37,8 +41,9 @@ def read_sidecar(path: Path) -> dict:
         data = json.loads(sidecar.read_text())
     except ValueError:
         raise InputError(f"{sidecar} is not valid JSON; the checkpoint is damaged") from None
-    if data.get("kind") != CHECKPOINT_KIND:
-        raise InputError(f"{sidecar} is not a risk-map planner checkpoint (kind={data.get('kind')})")
+    if data.get("kind") != kind:
+        raise InputError(f"{sidecar} is a {data.get('kind')!r} checkpoint, not {kind!r}; pass a "
+                         "checkpoint made for this planner")
     return data
 
 

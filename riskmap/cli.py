@@ -87,6 +87,31 @@ def _cmd_drive(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_train_baseline(args: argparse.Namespace) -> int:
+    from riskmap.train_baseline import BaselineTrainConfig, train_baseline
+
+    config = BaselineTrainConfig(kind=args.kind, data=args.data, out=args.out, epochs=args.epochs,
+                                 batch_size=args.batch_size, lr=args.lr,
+                                 history_frames=args.history_frames, seed=args.seed,
+                                 max_windows=args.max_windows)
+    best = train_baseline(config, resume=args.resume, progress=not args.quiet)
+    print(f"best epoch {best.get('epoch')}: val ADE {best['val_ade_m']:.2f} m; "
+          f"checkpoint {Path(args.out) / 'best.safetensors'}")
+    return 0
+
+
+def _cmd_evaluate(args: argparse.Namespace) -> int:
+    from riskmap.evaluate import EvalConfig, evaluate
+
+    planners = tuple(p.strip() for p in args.planners.split(",") if p.strip())
+    config = EvalConfig(env_id=args.env, planners=planners, episodes=args.episodes, seed=args.seed,
+                        mode=args.mode, episode_s=args.episode_s)
+    evaluate(config, Path(args.out), workers=args.workers, resume=args.resume,
+             progress=not args.quiet)
+    print((Path(args.out) / "table.md").read_text(), end="")
+    return 0
+
+
 def _cmd_figures_plans(args: argparse.Namespace) -> int:
     from riskmap.figures import plan_figures
 
@@ -140,6 +165,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=_cmd_train)
 
+    p = sub.add_parser("train-baseline", help="train a behaviour-cloning baseline (cnn, cnn_lstm, rvsg)")
+    p.add_argument("kind", choices=("cnn", "cnn_lstm", "cnn-lstm", "rvsg"))
+    p.add_argument("--data", required=True, help="dataset directory (from riskmap collect)")
+    p.add_argument("--out", required=True, help="run directory")
+    p.add_argument("--epochs", type=_positive_int, default=4)
+    p.add_argument("--batch-size", type=_positive_int, default=32)
+    p.add_argument("--lr", type=float, default=3e-4)
+    p.add_argument("--history-frames", type=_positive_int, default=4,
+                   help="cnn_lstm: raster frames 0.5 s apart fed to the LSTM")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--max-windows", type=_positive_int, default=None,
+                   help="use at most this many training windows (quick runs)")
+    p.add_argument("--resume", action="store_true", help="continue an interrupted run exactly")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=_cmd_train_baseline)
+
     p = sub.add_parser("drive", help="drive closed-loop episodes with a planner")
     p.add_argument("--checkpoint", help="risk-map planner checkpoint (same as --planner riskmap:CKPT)")
     p.add_argument("--planner", help="planner SPEC: idm, cv or riskmap:PATH")
@@ -154,6 +195,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--resume", action="store_true")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=_cmd_drive)
+
+    p = sub.add_parser("evaluate", help="closed-loop benchmark of planners (Table I metrics)")
+    p.add_argument("--planners", required=True,
+                   help="comma-separated planner SPECs: idm, replay, cv, riskmap:PATH, cnn:PATH, "
+                        "cnn_lstm:PATH, rvsg:PATH")
+    p.add_argument("--env", required=True)
+    p.add_argument("--episodes", type=_positive_int, required=True)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--mode", choices=("log", "reactive"), default="log",
+                   help="log: other vehicles replay the human's record; reactive: IDM/MOBIL traffic")
+    p.add_argument("--episode-s", type=float, default=None,
+                   help="simulated seconds per episode (default: the family's length)")
+    p.add_argument("--out", required=True)
+    p.add_argument("--workers", type=_positive_int, default=1, help="processes (default 1)")
+    p.add_argument("--resume", action="store_true")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=_cmd_evaluate)
 
     p = sub.add_parser("figures", help="export PNG figures")
     fig_sub = p.add_subparsers(dest="figure", required=True)

@@ -78,9 +78,13 @@ class DriveHooks:
 
 
 def drive_episode(env, planner, config: DriveConfig, episode: int, frames_dir: Path | None = None,
-                  hooks: DriveHooks = DriveHooks()) -> dict:
-    """Drive one closed-loop episode; `hooks` perturb or observe it (see `DriveHooks`)."""
-    run = Episode(env, config.env_id, config.seed, episode, config.control_hz, setup=hooks.setup)
+                  hooks: DriveHooks = DriveHooks(), run: Episode | None = None) -> dict:
+    """Drive one closed-loop episode; `hooks` perturb or observe it (see `DriveHooks`). `run`: an
+    already reset Episode to drive instead of a fresh one (for instance one whose traffic replays
+    a log; `hooks.setup` is then not used); the caller can read its recorder afterwards."""
+    if run is None:
+        run = Episode(env, config.env_id, config.seed, episode, config.control_hz,
+                      setup=hooks.setup)
     if hooks.on_reset is not None:
         hooks.on_reset(run)
     human = isinstance(planner, HumanDriver)
@@ -139,6 +143,7 @@ def drive_episode(env, planner, config: DriveConfig, episode: int, frames_dir: P
         "min_gap_m": float(min(gaps)) if gaps else float("inf"),
         "plan_ms_median": 1000 * float(np.median(plan_times)) if plan_times else None,
         "plan_ms_mean": 1000 * float(np.mean(plan_times)) if plan_times else None,
+        "plan_ms_p90": 1000 * float(np.percentile(plan_times, 90)) if plan_times else None,
         "plan_calls": len(plan_times),
     }
 

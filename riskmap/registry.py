@@ -5,13 +5,17 @@
     riskmap:PATH     the risk-map planner from a checkpoint (PATH with or without .safetensors)
     guard:SPEC       SPEC wrapped in the neuro-symbolic guard, TGAT-triggered (`guarded:` too)
     guard-always:SPEC  SPEC with the guard's deceleration plan always on at high speed
+    replay           log playback of the human's recorded trajectory (needs a recorded episode)
+    cnn:PATH, cnn_lstm:PATH (or cnn-lstm:PATH), rvsg:PATH
+                     behaviour-cloning baselines from `riskmap train-baseline` checkpoints
 """
 
 from __future__ import annotations
 
 from rasterize.errors import InputError
 
-SPECS = ("idm", "cv", "riskmap:PATH", "guard:SPEC", "guard-always:SPEC")
+SPECS = ("idm", "cv", "replay", "riskmap:PATH", "cnn:PATH", "cnn_lstm:PATH", "rvsg:PATH",
+         "guard:SPEC", "guard-always:SPEC")
 
 
 class HumanDriver:
@@ -38,4 +42,12 @@ def make_planner(spec: str, seed: int = 0, goal_variance: float | None = None):
         from riskmap.guard.guarded import make_guarded
 
         return make_guarded("always" if kind == "guard-always" else "tgat", arg, seed=seed)
+    if kind == "replay" and not arg:
+        from riskmap.log_replay import ReplayPlanner
+
+        return ReplayPlanner()
+    if kind in ("cnn", "cnn_lstm", "cnn-lstm", "rvsg") and arg:
+        from riskmap.bc import BCPlanner
+
+        return BCPlanner.load(arg, expected_kind=kind)
     raise InputError(f"unknown planner spec {spec!r}; use one of {', '.join(SPECS)}")
