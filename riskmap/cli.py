@@ -104,6 +104,18 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     from riskmap.evaluate import EvalConfig, evaluate
 
     planners = tuple(p.strip() for p in args.planners.split(",") if p.strip())
+    if args.commonroad:
+        from riskmap.evaluate_commonroad import evaluate_commonroad
+
+        if args.mode != "log" or args.env or args.episodes:
+            raise InputError("--commonroad evaluates recorded vehicles in log mode: drop --env, "
+                             "--episodes and --mode reactive")
+        evaluate_commonroad(args.commonroad, planners, Path(args.out), seed=args.seed,
+                            resume=args.resume, progress=not args.quiet)
+        print((Path(args.out) / "table.md").read_text(), end="")
+        return 0
+    if not args.env or not args.episodes:
+        raise InputError("evaluate needs --env ENV and --episodes N (or --commonroad FILES)")
     config = EvalConfig(env_id=args.env, planners=planners, episodes=args.episodes, seed=args.seed,
                         mode=args.mode, episode_s=args.episode_s)
     evaluate(config, Path(args.out), workers=args.workers, resume=args.resume,
@@ -200,8 +212,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--planners", required=True,
                    help="comma-separated planner SPECs: idm, replay, cv, riskmap:PATH, cnn:PATH, "
                         "cnn_lstm:PATH, rvsg:PATH")
-    p.add_argument("--env", required=True)
-    p.add_argument("--episodes", type=_positive_int, required=True)
+    p.add_argument("--env", help="highway-env id (simulated scenes)")
+    p.add_argument("--episodes", type=_positive_int, help="episodes (simulated scenes)")
+    p.add_argument("--commonroad", nargs="+", metavar="DIR_OR_FILE",
+                   help="evaluate on recorded vehicles of CommonRoad files instead (log mode)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--mode", choices=("log", "reactive"), default="log",
                    help="log: other vehicles replay the human's record; reactive: IDM/MOBIL traffic")
