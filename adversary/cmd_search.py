@@ -6,16 +6,7 @@ import argparse
 from pathlib import Path
 
 from rasterize.errors import InputError
-
-
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{value} must be at least 1")
-    return value
+from riskmap.cli import _positive_int
 
 
 def _print_summary(summary: dict, out: str) -> None:
