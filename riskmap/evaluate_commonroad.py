@@ -8,9 +8,9 @@ episode OUT/episodes/<planner>/<scenario>_<vehicle>.json (atomic; `--resume` ski
 ones), then OUT/results.json and OUT/table.md with means and 90th percentiles.
 
 `replay` is the recording itself, tracked by the same controller: the harness's error floor.
-Safety here is per episode (the share of episodes without a collision or leaving the road);
-the per-encounter Safety % of `riskmap evaluate` on simulated scenes needs every step's gaps and
-is not computed on recordings yet.
+Safety % is the simulated scenes' (`riskmap.metrics`: share of encounters with a recorded vehicle
+within 30 m that are dangerously close), per episode, then mean and 90th percentile; the share
+of episodes without a collision or leaving the road is reported beside it.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from riskmap.collect_commonroad import CommonRoadCollectConfig, demonstrators, s
 from riskmap.evaluate import planner_slug
 from riskmap.provenance import provenance
 
-METRICS = ("ade_m", "goal_error_m", "distance_m", "human_distance_m", "min_gap_m")
+METRICS = ("safety_pct", "ade_m", "goal_error_m", "distance_m", "human_distance_m", "min_gap_m")
 
 
 def _planner(spec: str, traffic: RecordedTraffic, vehicle_id: int, seed: int):
@@ -58,12 +58,13 @@ def summarise(records: list[dict]) -> dict:
 
 
 def markdown_table(results: dict) -> str:
-    lines = ["| planner | episodes | safe episodes % | collisions (struck from behind) | off-road | "
-             "ADE (m) | goal error (m) | driven (m) | human (m) |",
-             "|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| planner | episodes | Safety % | safe episodes % | collisions (struck from behind) | "
+             "off-road | ADE (m) | goal error (m) | driven (m) | human (m) |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for spec, s in results.items():
         lines.append(
-            f"| {spec} | {s['episodes']} | {s['safe_episodes_pct']:.0f} | "
+            f"| {spec} | {s['episodes']} | {s['safety_pct']['mean']:.1f} / {s['safety_pct']['p90']:.1f} | "
+            f"{s['safe_episodes_pct']:.0f} | "
             f"{100 * s['collision_rate']:.0f}% ({s['struck_from_behind']}) | "
             f"{100 * s['off_road_rate']:.0f}% | {s['ade_m']['mean']:.2f} / {s['ade_m']['p90']:.2f} | "
             f"{s['goal_error_m']['mean']:.2f} / {s['goal_error_m']['p90']:.2f} | "

@@ -41,6 +41,7 @@ from rasterize.geometry import box_gap
 from rasterize.scene import STATE_DIM, Scene
 from riskmap.control import ControllerConfig, TrackingController, planned_vehicle_class
 from riskmap.episode import _off_network
+from riskmap.metrics import SafetyConfig, dangerous_encounters, safety_pct
 from riskmap.planner import PLAN_DT_S, PLAN_STEPS, Plan, check_plan
 
 
@@ -220,6 +221,14 @@ def replay_commonroad_episode(scenario_path, ego_id: int, planner, start_s: floa
         if _off_network(road, vehicle, config.off_road_margin_m):
             off_road = True
             break
+    # Safety % as on simulated scenes (riskmap.metrics): every driven step, every other recorded
+    # vehicle within the encounter radius is an encounter, dangerous when close or about to touch.
+    driven_t = np.asarray(track_t[len(hist_t):])
+    driven = np.asarray(track[len(hist_t):]).reshape(-1, 6)
+    other_states, other_present = traffic.resample(others, driven_t)
+    dangerous, encounters = dangerous_encounters(driven, np.asarray(traffic.sizes[ego]), other_states,
+                                                 other_present, np.asarray(traffic.sizes)[others],
+                                                 SafetyConfig())
     human_path, _ = traffic.resample(np.array([ego]), np.asarray(track_t[len(hist_t) - 1:]))
     human_distance = float(np.linalg.norm(np.diff(human_path[0, :, :2], axis=0), axis=1).sum())
     return {
@@ -229,6 +238,8 @@ def replay_commonroad_episode(scenario_path, ego_id: int, planner, start_s: floa
         "human_distance_m": human_distance,
         "mean_speed_mps": float(np.mean(speeds)) if speeds else 0.0,
         "min_gap_m": float(min(gaps)) if gaps else float("inf"),
+        "dangerous": dangerous, "encounters": encounters,
+        "safety_pct": safety_pct(dangerous, encounters),
         "ade_m": float(np.mean(errors)) if errors else 0.0,
         "goal_error_m": errors[-1] if errors else 0.0,
         "plan_ms_median": 1000 * float(np.median(plan_times)) if plan_times else None,

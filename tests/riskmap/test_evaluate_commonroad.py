@@ -20,6 +20,9 @@ def test_replay_recovers_the_human_and_a_rerun_resumes(tmp_path, monkeypatch):
     replay = results["replay"]
     assert replay["episodes"] == len(list((out / "episodes" / "replay").glob("*.json"))) > 0
     assert replay["ade_m"]["mean"] < 2.0             # the controller tracking the log itself
+    assert 0.0 <= replay["safety_pct"]["mean"] <= 100.0
+    assert all(r["encounters"] > 0 for r in map(lambda p: json.loads(p.read_text()),
+                                                 (out / "episodes" / "replay").glob("*.json")))
     assert json.loads((out / "results.json").read_text())["results"]["replay"] == replay
     assert "| replay |" in (out / "table.md").read_text()
 
