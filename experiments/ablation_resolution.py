@@ -1,0 +1,94 @@
+"""Grid resolution 25/50/75/100: value-iteration and total plan time per call vs ADE and goal error
+(planner paper Fig. 3f analogue).
+
+One run per resolution, same 640 highway windows, seed, v = 1 and 2 epochs:
+
+    riskmap train --data data/highway --out runs/highway_r{G} --resolution G --epochs 2 --lr 5e-4 \
+        --uncertainty-weight 1 --max-windows 640 --seed 0          # G in 25 75 100; 50 = runs/highway_v1
+
+Each plans the same held-out windows (batch 1, torch with --threads threads); medians of the
+per-stage timings, means of ADE and goal error. Writes experiments/results/ablation_resolution/.
+
+    .venv/bin/python experiments/ablation_resolution.py [--windows 60]
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from rasterize.frames import ego_from_grid, ego_from_world, ego_pose
+from riskmap.atomic import write_json
+from riskmap.data import DemoDataset
+from riskmap.planner import RiskMapPlanner
+
+RUNS = {25: "runs/highway_r25", 50: "runs/highway_v1", 75: "runs/highway_r75", 100: "runs/highway_r100"}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--heldout", type=Path, default=Path("data/highway_heldout"))
+    parser.add_argument("--windows", type=int, default=60)
+    parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--out", type=Path, default=Path("experiments/results/ablation_resolution"))
+    args = parser.parse_args()
+    torch.set_num_threads(args.threads)
+    rows = []
+    for g, run in RUNS.items():
+        planner = RiskMapPlanner.load(Path(run) / "last")
+        dataset = DemoDataset(args.heldout, planner.grid.rows, raster=planner.raster)
+        picks = np.unique(np.linspace(0, len(dataset) - 1, args.windows).astype(int))
+        ade, goal, vi_ms, total_ms = [], [], [], []
+        for i in picks:
+            scene = dataset.scene(int(i))
+            plan = planner.plan(scene)
+            origin, heading = ego_pose(scene)
+            demo = ego_from_world(scene.ego_future_xy(), origin, heading)
+            ade.append(np.linalg.norm(plan.waypoints - demo, axis=1).mean())
+            goal.append(np.linalg.norm(plan.waypoints[-1] - ego_from_grid(plan.goal_cell, planner.grid)))
+            vi_ms.append(1000 * plan.timings_s["vi"])
+            total_ms.append(1000 * plan.timings_s["total"])
+        rows.append({"resolution": g, "horizon": planner.horizon, "windows": len(picks),
+                     "ade_m": float(np.mean(ade)), "goal_error_m": float(np.mean(goal)),
+                     "vi_ms": float(np.median(vi_ms)), "total_ms": float(np.median(total_ms))})
+        print(" ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in rows[-1].items()),
+              flush=True)
+    write_json(args.out / "results.json", {"rows": rows, "runs": RUNS, "threads": args.threads})
+    lines = ["| resolution | horizon | windows | ADE (m) | goal error (m) | VI ms | plan ms |",
+             "|---|---|---|---|---|---|---|"]
+    lines += [f"| {r['resolution']} | {r['horizon']} | {r['windows']} | {r['ade_m']:.2f} | "
+              f"{r['goal_error_m']:.2f} | {r['vi_ms']:.1f} | {r['total_ms']:.1f} |" for r in rows]
+    (args.out / "table.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(8.5, 3.3), dpi=110)
+    g = [r["resolution"] for r in rows]
+    axes[0].plot(g, [r["vi_ms"] for r in rows], "-o", label="value iteration")
+    axes[0].plot(g, [r["total_ms"] for r in rows], "-s", label="whole plan")
+    axes[0].set_ylabel("ms per call (median)")
+    axes[0].legend(fontsize=8)
+    axes[1].plot(g, [r["ade_m"] for r in rows], "-o", label="ADE")
+    axes[1].plot(g, [r["goal_error_m"] for r in rows], "-s", label="goal error")
+    axes[1].set_ylabel("m (mean over held-out windows)")
+    axes[1].legend(fontsize=8)
+    for ax in axes:
+        ax.set_xlabel("grid resolution (cells a side)")
+        ax.set_xticks(g)
+        ax.grid(alpha=0.3)
+    fig.suptitle("resolution ablation, highway (same data, seed and training per resolution)", fontsize=10)
+    fig.tight_layout()
+    args.out.mkdir(parents=True, exist_ok=True)
+    fig.savefig(args.out / "ablation.png")
+    plt.close(fig)
+
+
+if __name__ == "__main__":
+    main()
