@@ -38,6 +38,9 @@ def main() -> None:
     torch.set_num_threads(args.threads)
     rows = []
     for g, run in RUNS.items():
+        if not (Path(run) / "last.safetensors").exists():
+            print(f"resolution {g}: no run at {run}; train it first (see the docstring)", flush=True)
+            continue
         planner = RiskMapPlanner.load(Path(run) / "last")
         dataset = DemoDataset(args.heldout, planner.grid.rows, raster=planner.raster)
         picks = np.unique(np.linspace(0, len(dataset) - 1, args.windows).astype(int))
