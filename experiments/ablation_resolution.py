@@ -15,12 +15,17 @@ per-stage timings, means of ADE and goal error. Writes experiments/results/ablat
 from __future__ import annotations
 
 import argparse
+import json
+import sys
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from rasterize.frames import ego_from_grid, ego_from_world, ego_pose
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from eval_plans import window_errors
+
 from riskmap.atomic import write_json
 from riskmap.data import DemoDataset
 from riskmap.planner import RiskMapPlanner
@@ -44,19 +49,11 @@ def main() -> None:
         planner = RiskMapPlanner.load(Path(run) / "last")
         dataset = DemoDataset(args.heldout, planner.grid.rows, raster=planner.raster)
         picks = np.unique(np.linspace(0, len(dataset) - 1, args.windows).astype(int))
-        ade, goal, vi_ms, total_ms = [], [], [], []
-        for i in picks:
-            scene = dataset.scene(int(i))
-            plan = planner.plan(scene)
-            origin, heading = ego_pose(scene)
-            demo = ego_from_world(scene.ego_future_xy(), origin, heading)
-            ade.append(np.linalg.norm(plan.waypoints - demo, axis=1).mean())
-            goal.append(np.linalg.norm(plan.waypoints[-1] - ego_from_grid(plan.goal_cell, planner.grid)))
-            vi_ms.append(1000 * plan.timings_s["vi"])
-            total_ms.append(1000 * plan.timings_s["total"])
+        side = json.loads((Path(run) / "last.json").read_text())["maps"]
+        e = window_errors(planner, dataset, picks, side["sigma_x"], side["sigma_y"])
         rows.append({"resolution": g, "horizon": planner.horizon, "windows": len(picks),
-                     "ade_m": float(np.mean(ade)), "goal_error_m": float(np.mean(goal)),
-                     "vi_ms": float(np.median(vi_ms)), "total_ms": float(np.median(total_ms))})
+                     "ade_m": float(np.mean(e["ade_m"])), "goal_error_m": float(np.mean(e["goal_error_m"])),
+                     "vi_ms": float(np.median(e["vi_ms"])), "total_ms": float(np.median(e["plan_ms"]))})
         print(" ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in rows[-1].items()),
               flush=True)
     write_json(args.out / "results.json", {"rows": rows, "runs": RUNS, "threads": args.threads})

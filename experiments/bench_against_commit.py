@@ -1,4 +1,4 @@
-"""Value iteration, state visitation and sampler of this tree against those of an earlier commit, in one process.
+"""Value iteration, state visitation and sampler of this tree against an earlier commit's, in one process.
 
 Loads `riskmap/vi.py` and `riskmap/sampler.py` as they were at `--commit` (git show) next to the
 current ones, checks that both give bitwise-equal results on the same inputs, and times them
@@ -51,6 +51,19 @@ def timed(fn, *args, **kwargs) -> float:
     return time.perf_counter() - t0
 
 
+def compare(then_fn, now_fn, args: tuple, repeats: int) -> tuple[dict, tuple]:
+    """Bitwise equality of the two functions' tensor outputs on `args`, and their median times
+    over `repeats` interleaved calls; also returns the current function's output."""
+    then, now = then_fn(*args), now_fn(*args)
+    equal = all(torch.equal(a, b) for a, b in zip(then, now, strict=True))
+    t_then, t_now = [], []
+    for _ in range(repeats):
+        t_then.append(timed(then_fn, *args))
+        t_now.append(timed(now_fn, *args))
+    return {"bitwise_equal": equal, "then_ms": 1000 * statistics.median(t_then),
+            "now_ms": 1000 * statistics.median(t_now)}, now
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--commit", required=True)
@@ -70,27 +83,13 @@ def main() -> None:
         rng = torch.Generator().manual_seed(g)
         reward = -3.0 * torch.rand((1, g, g), generator=rng)
         goal = -10.0 * torch.rand((1, g, g), generator=rng)
-        then, now = vi_then.soft_value_iteration(reward, goal, horizon), \
-            vi_now.soft_value_iteration(reward, goal, horizon)
-        equal = all(torch.equal(a, b) for a, b in zip(then, now, strict=True))
-        t_then, t_now = [], []
-        for _ in range(args.repeats):
-            t_then.append(timed(vi_then.soft_value_iteration, reward, goal, horizon))
-            t_now.append(timed(vi_now.soft_value_iteration, reward, goal, horizon))
-        rows.append({"stage": "vi", "resolution": g, "bitwise_equal": equal,
-                     "then_ms": 1000 * statistics.median(t_then),
-                     "now_ms": 1000 * statistics.median(t_now)})
-        policy, start = now[1], torch.tensor([[g - 5, g // 2]])
-        then, now = vi_then.state_visitation(policy, start, horizon), \
-            vi_now.state_visitation(policy, start, horizon)
-        equal = all(torch.equal(a, b) for a, b in zip(then, now, strict=True))
-        t_then, t_now = [], []
-        for _ in range(args.repeats):
-            t_then.append(timed(vi_then.state_visitation, policy, start, horizon))
-            t_now.append(timed(vi_now.state_visitation, policy, start, horizon))
-        rows.append({"stage": "svf", "resolution": g, "bitwise_equal": equal,
-                     "then_ms": 1000 * statistics.median(t_then),
-                     "now_ms": 1000 * statistics.median(t_now)})
+        row, (_, policy) = compare(vi_then.soft_value_iteration, vi_now.soft_value_iteration,
+                                   (reward, goal, horizon), args.repeats)
+        rows.append({"stage": "vi", "resolution": g, **row})
+        start = torch.tensor([[g - 5, g // 2]])
+        row, _ = compare(vi_then.state_visitation, vi_now.state_visitation, (policy, start, horizon),
+                         args.repeats)
+        rows.append({"stage": "svf", "resolution": g, **row})
     planner = RiskMapPlanner.load(args.checkpoint)
     dataset = DemoDataset(args.data, planner.grid.rows, raster=planner.raster)
     policies = [torch.from_numpy(planner.plan(dataset.scene(i)).policy)

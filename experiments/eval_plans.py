@@ -29,7 +29,7 @@ def window_errors(planner: RiskMapPlanner, dataset: DemoDataset, indices, sigma_
                   sigma_y: float) -> dict[str, list[float]]:
     """Per-window ADE, FDE, goal error, SVF overlap and planning time of `planner` on `indices`."""
     out = {"index": [], "ade_m": [], "fde_m": [], "goal_error_m": [], "overlap": [], "plan_ms": [],
-           "plan_end_m": [], "demo_end_m": [], "end_short_m": []}
+           "plan_end_m": [], "demo_end_m": [], "end_short_m": [], "vi_ms": []}
     for i in indices:
         scene = dataset.scene(int(i))
         plan = planner.plan(scene)
@@ -44,6 +44,7 @@ def window_errors(planner: RiskMapPlanner, dataset: DemoDataset, indices, sigma_
             plan.waypoints[-1] - ego_from_grid(plan.goal_cell, planner.grid))))
         out["overlap"].append(float((plan.svf * unc).sum() / max(plan.svf.sum(), 1e-9)))
         out["plan_ms"].append(1000 * plan.timings_s["total"])
+        out["vi_ms"].append(1000 * plan.timings_s["vi"])
         out["plan_end_m"].append(float(np.linalg.norm(plan.waypoints[-1])))   # how far it goes
         out["demo_end_m"].append(float(np.linalg.norm(demo[-1])))
         # How far the plan's end lies behind (+) or beyond (−) the demonstration's, along x.

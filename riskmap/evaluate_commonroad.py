@@ -30,7 +30,9 @@ from riskmap.provenance import provenance
 METRICS = ("safety_pct", "ade_m", "goal_error_m", "distance_m", "human_distance_m", "min_gap_m")
 
 
-def _planner(spec: str, traffic: RecordedTraffic, vehicle_id: int, seed: int):
+def _planner(spec: str, traffic: RecordedTraffic, vehicle_id: int, seed: int, loaded: dict):
+    """The planner for one episode. `replay` is tied to its recording; any other SPEC is loaded
+    once into `loaded` and reused (each episode resets it, so results do not depend on order)."""
     from riskmap.registry import make_planner
     from riskmap.replay_commonroad import RecordedFuturePlanner
 
@@ -39,7 +41,9 @@ def _planner(spec: str, traffic: RecordedTraffic, vehicle_id: int, seed: int):
     if spec == "idm":
         raise InputError("--planners idm: on recordings the human is the recording itself; "
                          "use `replay`")
-    return make_planner(spec, seed=seed)
+    if spec not in loaded:
+        loaded[spec] = make_planner(spec, seed=seed)
+    return loaded[spec]
 
 
 def summarise(records: list[dict]) -> dict:
@@ -99,13 +103,15 @@ def evaluate_commonroad(recordings: list[str | Path], planners: tuple[str, ...],
         raise InputError(f"no recorded vehicle in {', '.join(map(str, recordings))} has 2 s of "
                          "history and 6 s of future; nothing to evaluate")
     records = {spec: [] for spec in planners}
+    loaded: dict = {}
     for spec in planners:
         for traffic, vehicle in tqdm(episodes, disable=not progress, desc=f"evaluate {spec}"):
             path = out / "episodes" / planner_slug(spec) / f"{traffic.name}_{vehicle}.json"
             if resume and path.exists():
                 records[spec].append(json.loads(path.read_text()))
                 continue
-            result = replay_commonroad_episode(traffic, vehicle, _planner(spec, traffic, vehicle, seed))
+            result = replay_commonroad_episode(traffic, vehicle,
+                                               _planner(spec, traffic, vehicle, seed, loaded))
             write_json(path, result)
             records[spec].append(result)
     results = {spec: summarise(rs) for spec, rs in records.items()}
