@@ -13,13 +13,14 @@ from rasterize.errors import InputError
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from adversary import cmd_report, cmd_search, cmd_stress_test
+    from adversary import cmd_crash, cmd_report, cmd_search, cmd_stress_test
 
     parser = argparse.ArgumentParser(prog="adversary", description=__doc__.splitlines()[0])
     subparsers = parser.add_subparsers(dest="command", required=True)
     cmd_stress_test.add_parser(subparsers)
     cmd_report.add_parser(subparsers)
     cmd_search.add_parsers(subparsers)
+    cmd_crash.add_parsers(subparsers)
     return parser
 
 

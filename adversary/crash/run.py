@@ -1,0 +1,212 @@
+"""`adversary scenes` and `adversary attack`: record held-out attack scenes, attack them all.
+
+Scenes: DIR/scene_NNNN.npz (+ .json) written by `record_scenes`, sweeping episodes 0, 1, ... of
+`--seed` and skipping those that cannot be attacked (the human crashed before t0 + horizon, or
+no vehicle near the ego); DIR/index.json lists them in order.
+
+Attacks: OUT/attacks/<scene>.json, one per scene, written atomically as soon as it finishes;
+`--resume` skips the scenes already there, so a killed run loses nothing. OUT/summary.json and
+OUT/table.md aggregate them (denominators included). With `--workers K` scenes run in a process
+pool; every scene's random draws depend only on (seed, scene), so results do not depend on K.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from adversary.crash.attack import AttackConfig, attack_record, load_models
+from rasterize.errors import InputError
+from riskmap.atomic import atomic_write, write_json
+from riskmap.provenance import provenance
+
+INDEX = "index.json"
+
+
+def record_scenes(env_id: str, seed: int, count: int, out: Path, first_episode: int = 0,
+                  t0_s: float = 2.0, resume: bool = False, progress: bool = True) -> dict:
+    from adversary.crash.scenes import AttackScene, record_attack_scene, save_record
+
+    out = Path(out)
+    index_path = out / INDEX
+    index = json.loads(index_path.read_text()) if resume and index_path.exists() else None
+    if index is None:
+        if out.exists() and any(out.iterdir()):
+            raise InputError(f"--out {out} already holds scenes; pass --resume or choose another --out")
+        index = {"env_id": env_id, "seed": seed, "t0_s": t0_s, "scenes": [], "skipped": [],
+                 "next_episode": first_episode, **provenance()}
+    elif (index["env_id"], index["seed"], index["t0_s"]) != (env_id, seed, t0_s):
+        raise InputError(f"--out {out} holds scenes of {index['env_id']} seed {index['seed']}; choose another --out")
+    out.mkdir(parents=True, exist_ok=True)
+    while len(index["scenes"]) < count:
+        episode = index["next_episode"]
+        name = f"scene_{episode:05d}"
+        try:
+            record = record_attack_scene(AttackScene(env_id, seed, episode, t0_s))
+        except InputError as error:
+            index["skipped"].append({"episode": episode, "why": str(error)})
+        else:
+            save_record(record, out / f"{name}.npz")
+            index["scenes"].append(name)
+            if progress and len(index["scenes"]) % 10 == 0:
+                print(f"{len(index['scenes'])}/{count} scenes (episode {episode})", flush=True)
+        index["next_episode"] = episode + 1
+        write_json(index_path, index)
+    return index
+
+
+def scene_paths(scenes_dir: Path, count: int) -> list[Path]:
+    scenes_dir = Path(scenes_dir)
+    try:
+        index = json.loads((scenes_dir / INDEX).read_text())
+    except (OSError, ValueError):
+        raise InputError(f"--scenes {scenes_dir} holds no scene index; make one with `adversary scenes`") from None
+    if len(index["scenes"]) < count:
+        raise InputError(f"--scenes {scenes_dir} holds {len(index['scenes'])} scenes, fewer than --count "
+                         f"{count}; record more with `adversary scenes ... --resume`")
+    return [scenes_dir / f"{name}.npz" for name in index["scenes"][:count]]
+
+
+_MODELS: dict = {}
+
+
+def _attack_one(path: str, planner_spec: str, config: AttackConfig, seed: int, traffic: str,
+                selectors: str | None, panel: str | None) -> dict:
+    """Worker entry: one scene, never raises (an error becomes the record)."""
+    import torch
+
+    from adversary.crash.judge import cached_planner
+    from adversary.crash.scenes import load_record
+
+    torch.set_num_threads(1)
+    started = time.perf_counter()
+    name = Path(path).stem
+    try:
+        key = (traffic, selectors)
+        if key not in _MODELS:
+            _MODELS[key] = load_models(Path(traffic), Path(selectors) if selectors else None)
+        record = load_record(Path(path))
+        scene_seed = int(np.random.SeedSequence([seed, record.scene.scene_seed, record.scene.episode])
+                         .generate_state(1)[0])
+        planner = cached_planner(planner_spec, seed)
+        result = attack_record(record, _MODELS[key], planner, planner_spec, config, scene_seed,
+                               Path(panel) if panel else None)
+    except Exception as error:  # noqa: BLE001  (a failing scene is recorded; the run goes on)
+        result = {"status": "error", "collision": False,
+                  "error": (f"{type(error).__name__}: {error}".splitlines() or [""])[0][:500],
+                  "seconds": time.perf_counter() - started}
+    return {"name": name, **result}
+
+
+def summarise(records: list[dict]) -> dict:
+    ok = [r for r in records if r["status"] == "ok"]
+    hits = [r for r in ok if r["collision"]]
+    n = len(records)
+
+    def rate(items, key):
+        return sum(bool(r["metrics"][key]) for r in items) / len(items) if items else None
+
+    kin = [r["metrics"]["kinematic_value_mps"] for r in hits if r["metrics"]["kinematic_value_mps"] is not None]
+    solved = [r["metrics"]["solution_found"] for r in hits if r["metrics"]["solution_found"] is not None]
+    types: dict[str, int] = {}
+    for r in hits:
+        types[r["metrics"]["collision_type"]] = types.get(r["metrics"]["collision_type"], 0) + 1
+    seconds = [r["seconds"] for r in records if r["status"] != "error"]
+    return {
+        "scenes": n, "attacked": len(ok),
+        "no_candidate": sum(r["status"] == "no_candidate" for r in records),
+        "errors": sum(r["status"] == "error" for r in records),
+        "collisions": len(hits),
+        "collision_rate": len(hits) / n if n else None,       # over every scene: a scene without a
+        "adversary_off_road_rate": rate(ok, "adversary_off_road"),   # candidate counts as a miss
+        "other_off_road_rate": rate(ok, "other_off_road"),
+        "ego_off_road_rate": rate(ok, "ego_off_road"),
+        "kinematic_value_mps": float(np.mean(kin)) if kin else None,
+        "solution_rate": float(np.mean(solved)) if solved else None,
+        "collision_types": types,
+        "seconds_per_scene_median": float(np.median(seconds)) if seconds else None,
+        "seconds_per_scene_mean": float(np.mean(seconds)) if seconds else None,
+        "iterations_mean": float(np.mean([r["generation"]["iterations"] for r in ok])) if ok else None,
+        "replans_mean": float(np.mean([r["generation"]["replans"] for r in ok])) if ok else None,
+    }
+
+
+def table_row(label: str, s: dict) -> str:
+    def pct(v):
+        return "–" if v is None else f"{100 * v:.1f}"
+
+    def num(v, fmt="{:.2f}"):
+        return "–" if v is None else fmt.format(v)
+
+    return (f"| {label} | {s['collisions']}/{s['scenes']} ({pct(s['collision_rate'])}) | "
+            f"{pct(s['adversary_off_road_rate'])} | {pct(s['other_off_road_rate'])} | "
+            f"{num(s['kinematic_value_mps'])} | {pct(s['solution_rate'])} | "
+            f"{num(s['seconds_per_scene_median'], '{:.1f}')} |")
+
+
+TABLE_HEADER = ("| run | collision | adv off-road % | other off-road % | kinematic value m/s | "
+                "solution % | s/scene |\n|---|---|---|---|---|---|---|")
+
+
+def run_attacks(planner_spec: str, scenes_dir: Path, count: int, config: AttackConfig, seed: int,
+                out: Path, traffic: Path, selectors: Path | None, workers: int = 1, resume: bool = False,
+                panels: int = 0, progress: bool = True) -> dict:
+    from riskmap.registry import make_planner
+
+    out = Path(out)
+    paths = scene_paths(scenes_dir, count)
+    make_planner(planner_spec, seed=seed)          # a bad SPEC fails here, before any work
+    load_models(Path(traffic), Path(selectors) if selectors else None)
+    attacks_dir = out / "attacks"
+    meta = {"planner": planner_spec, "scenes": str(scenes_dir), "count": count, "config": asdict(config),
+            "seed": seed, "traffic_model": str(traffic), "selector_model": str(selectors) if selectors else None}
+    if attacks_dir.exists() and any(attacks_dir.iterdir()):
+        if not resume:
+            raise InputError(f"--out {out} already holds attacks; pass --resume to continue or choose another --out")
+        previous = json.loads((out / "run.json").read_text())
+        if {k: v for k, v in previous.items() if k in meta and k != "count"} != \
+                {k: v for k, v in meta.items() if k != "count"}:
+            raise InputError(f"--out {out} was attacked with other settings; choose another --out")
+    attacks_dir.mkdir(parents=True, exist_ok=True)
+    write_json(out / "run.json", {**meta, **provenance()})
+    todo = [p for p in paths if not (attacks_dir / f"{p.stem}.json").exists()]
+    panels_dir = out / "panels"
+
+    def panel_for(i: int) -> str | None:
+        return str(panels_dir / f"{paths[i].stem}.png") if i < panels else None
+
+    args = [(str(p), planner_spec, config, seed, str(traffic), str(selectors) if selectors else None,
+             panel_for(paths.index(p))) for p in todo]
+    done = 0
+
+    def save(result: dict) -> None:
+        nonlocal done
+        write_json(attacks_dir / f"{result['name']}.json", result)
+        done += 1
+        if progress:
+            print(f"[{done}/{len(todo)}] {result['name']}: {result['status']}"
+                  f"{' COLLISION' if result['collision'] else ''} ({result['seconds']:.1f} s)", flush=True)
+
+    if panels:
+        panels_dir.mkdir(parents=True, exist_ok=True)
+    if workers <= 1:
+        for a in args:
+            save(_attack_one(*a))
+    else:
+        with ProcessPoolExecutor(max_workers=workers, initializer=os.nice, initargs=(0,)) as pool:
+            futures = [pool.submit(_attack_one, *a) for a in args]
+            for future in as_completed(futures):
+                save(future.result())
+    records = [json.loads((attacks_dir / f"{p.stem}.json").read_text()) for p in paths]
+    summary = {**meta, "summary": summarise(records)}
+    write_json(out / "summary.json", summary)
+    label = f"{planner_spec} / {config.selector}"
+    atomic_write(out / "table.md", lambda f: f.write(
+        (TABLE_HEADER + "\n" + table_row(label, summary["summary"]) + "\n").encode()))
+    return summary

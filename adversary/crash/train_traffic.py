@@ -1,0 +1,273 @@
+"""`adversary train-traffic`: fit the traffic CVAE on collected windows, report its realism.
+
+Loss per scene: the posterior reconstruction of every agent's known future (mean position
+error in units of `position_scale_m`, heading 1 - cos, speed error) plus beta * KL(q || p),
+averaged over real agents. Validation holds out whole episodes (the last `val_fraction` of each
+dataset's shards). Every epoch appends to RUN/log.jsonl and keeps the best validation ADE as
+RUN/best (safetensors + sidecar); RUN/state.pt lets `--resume` continue where it stopped.
+
+Realism metrics (`evaluate_model`), on the validation scenes:
+    recon ADE / FDE (m)   posterior mean decoded, against the logged futures of every agent
+    prior minADE-K (m)    best of K prior samples per agent
+    collision rate        share of scenes in which two agents' boxes overlap at some 2 Hz step,
+                          for prior samples and for the logged futures (the data's own rate)
+    off-road rate         share of agents with more than 5% of the box off the drivable area at
+                          some step (box sampled on a 5 x 3 grid of points), same two columns
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from adversary.crash.batch import Batch, collate
+from adversary.crash.features import FeatureConfig, SceneTensors, scene_tensors
+from adversary.crash.traffic_model import TrafficModel, TrafficModelConfig, kl_normal
+from rasterize.errors import InputError
+from rasterize.frames import box_corners
+from rasterize.geometry import boxes_overlap
+from riskmap.atomic import write_json
+from riskmap.checkpoint import read_sidecar, save_checkpoint
+
+CHECKPOINT_KIND = "traffic_cvae"
+
+
+@dataclass(frozen=True)
+class TrainTrafficConfig:
+    epochs: int = 30
+    batch_size: int = 32
+    lr: float = 1e-3
+    kl_weight: float = 0.05         # beta
+    free_bits: float = 2.0          # nats per agent the KL may use without penalty; without it the
+                                    # posterior collapses onto the prior (highway futures are very
+                                    # predictable from the past) and the decoder ignores z, which
+                                    # leaves the attack nothing to optimise
+    val_fraction: float = 0.15      # share of each dataset's episodes held out
+    seed: int = 0
+    max_windows_per_episode: int = 0   # 0: all
+
+
+def load_windows(roots: list[Path], features: FeatureConfig, val_fraction: float,
+                 max_per_episode: int = 0) -> tuple[list[SceneTensors], list[SceneTensors]]:
+    """(train, validation) scene tensors of datasets collected by `riskmap collect`."""
+    from riskmap.data import DemoDataset
+
+    train, val = [], []
+    for root in roots:
+        data = DemoDataset(root)
+        episodes = sorted({data.episode_of(i) for i in range(len(data))})
+        cut = episodes[round(len(episodes) * (1.0 - val_fraction))] if val_fraction > 0 else None
+        taken: dict[int, int] = {}
+        for i in range(len(data)):
+            ep = data.episode_of(i)
+            if max_per_episode and taken.get(ep, 0) >= max_per_episode:
+                continue
+            taken[ep] = taken.get(ep, 0) + 1
+            try:
+                item = scene_tensors(data.scene(i), features)
+            except InputError:
+                continue          # a window without map or history: nothing to learn from
+            (val if cut is not None and ep >= cut else train).append(item)
+    if not train:
+        raise InputError(f"--data {', '.join(map(str, roots))} gave no usable training windows")
+    return train, val
+
+
+def reconstruction_loss(model: TrafficModel, batch: Batch, traj: torch.Tensor) -> torch.Tensor:
+    """Per-agent loss [B, N] of decoded trajectories [B, N, F, 4] against batch.future."""
+    s = model.config
+    valid = batch.future_valid.float()
+    pos = (traj[..., :2] - batch.future[..., :2]).norm(dim=-1) / s.position_scale_m
+    heading = 1.0 - (torch.cos(traj[..., 2]) * batch.future[..., 2] + torch.sin(traj[..., 2]) * batch.future[..., 3])
+    speed = (traj[..., 3] - batch.future[..., 4]).abs() / s.speed_scale_mps
+    per_step = pos + heading + 0.5 * speed
+    return (per_step * valid).sum(-1) / valid.sum(-1).clamp(min=1.0)
+
+
+def training_loss(model: TrafficModel, batch: Batch, kl_weight: float, free_bits: float = 0.0
+                  ) -> tuple[torch.Tensor, dict]:
+    enc = model.encode(batch)
+    mu, logvar = model.posterior_of(batch, enc)
+    z = mu + torch.randn_like(mu) * (0.5 * logvar).exp()
+    traj = model.decode(batch, enc, z)
+    agents = (batch.agent_mask & batch.future_valid.any(-1)).float()
+    recon = (reconstruction_loss(model, batch, traj) * agents).sum() / agents.sum().clamp(min=1.0)
+    kl_agent = kl_normal(mu, logvar, enc.prior_mu, enc.prior_logvar)
+    kl = (kl_agent * agents).sum() / agents.sum().clamp(min=1.0)
+    penalised = (torch.relu(kl_agent - free_bits) * agents).sum() / agents.sum().clamp(min=1.0)
+    return recon + kl_weight * penalised, {"recon": float(recon.detach()), "kl": float(kl.detach())}
+
+
+def _batches(items: list, size: int, rng: np.random.Generator | None):
+    order = np.arange(len(items)) if rng is None else rng.permutation(len(items))
+    for start in range(0, len(items), size):
+        yield collate([items[i] for i in order[start:start + size]])
+
+
+def _box_points(traj: np.ndarray, sizes: np.ndarray) -> np.ndarray:
+    """Points [N, F, 15, 2] on a 5 x 3 grid over every box of trajectories [N, F, 4]."""
+    u = np.linspace(-0.5, 0.5, 5)
+    v = np.linspace(-0.5, 0.5, 3)
+    uu, vv = np.meshgrid(u, v)
+    local = np.stack([uu.ravel(), vv.ravel()], -1)                      # [15, 2]
+    length, width = sizes[:, None, None, 0], sizes[:, None, None, 1]
+    c, s = np.cos(traj[..., 2])[..., None], np.sin(traj[..., 2])[..., None]
+    lx, ly = local[None, None, :, 0] * length, local[None, None, :, 1] * width
+    return np.stack([traj[..., None, 0] + c * lx - s * ly, traj[..., None, 1] + s * lx + c * ly], -1)
+
+
+def scene_collides(traj: np.ndarray, sizes: np.ndarray, valid: np.ndarray) -> bool:
+    """Whether two agents' boxes overlap at some step; traj [N, F, 4], valid [N, F]."""
+    f = valid.shape[1]
+    for t in range(f):
+        live = np.flatnonzero(valid[:, t])
+        for a_i, a in enumerate(live):
+            for b in live[a_i + 1:]:
+                if np.linalg.norm(traj[a, t, :2] - traj[b, t, :2]) > 0.5 * (sizes[a, 0] + sizes[b, 0]) + 1.0:
+                    continue
+                box_a = box_corners(traj[a, t, :2], [np.cos(traj[a, t, 2]), np.sin(traj[a, t, 2])], *sizes[a])
+                box_b = box_corners(traj[b, t, :2], [np.cos(traj[b, t, 2]), np.sin(traj[b, t, 2])], *sizes[b])
+                if boxes_overlap(box_a, box_b):
+                    return True
+    return False
+
+
+def off_road_agents(item: SceneTensors, traj: np.ndarray, valid: np.ndarray,
+                    threshold: float = 0.05) -> np.ndarray:
+    """[N] bool: more than `threshold` of the box off the drivable area at some valid step."""
+    points = _box_points(traj, item.sizes)
+    off = item.off_road.sample(points) > 0.0                             # [N, F, 15]
+    return ((off.mean(-1) > threshold) & valid).any(-1)
+
+
+def _logged_traj(item: SceneTensors) -> np.ndarray:
+    f = item.future
+    return np.stack([f[..., 0], f[..., 1], np.arctan2(f[..., 3], f[..., 2]), f[..., 4]], -1)
+
+
+@torch.no_grad()
+def evaluate_model(model: TrafficModel, items: list[SceneTensors], samples: int = 5, seed: int = 0,
+                   batch_size: int = 64) -> dict:
+    model.eval()
+    gen = torch.Generator().manual_seed(seed)
+    ade, fde, min_ade = [], [], []
+    coll = {"prior": 0, "posterior": 0, "logged": 0}
+    off = {"prior": [0, 0], "posterior": [0, 0], "logged": [0, 0]}
+    for start in range(0, len(items), batch_size):
+        chunk = items[start:start + batch_size]
+        batch = collate(chunk)
+        enc = model.encode(batch)
+        mu, _ = model.posterior_of(batch, enc)
+        recon = model.decode(batch, enc, mu).numpy()
+        prior = []
+        for _ in range(samples):
+            eps = torch.randn(enc.prior_mu.shape, generator=gen)
+            prior.append(model.decode(batch, enc, enc.prior_mu + eps * (0.5 * enc.prior_logvar).exp()).numpy())
+        for i, item in enumerate(chunk):
+            n = item.num_agents
+            valid = item.future_valid
+            err = np.linalg.norm(recon[i, :n, :, :2] - item.future[..., :2], axis=-1)
+            has = valid.any(-1)
+            ade.extend((err * valid).sum(-1)[has] / valid.sum(-1)[has])
+            full = valid[:, -1]
+            fde.extend(err[full, -1])
+            sample_err = np.stack([np.linalg.norm(p[i, :n, :, :2] - item.future[..., :2], axis=-1)
+                                   for p in prior])                    # [K, N, F]
+            min_ade.extend(((sample_err * valid).sum(-1) / valid.sum(-1).clip(min=1)).min(0)[has])
+            every = np.ones_like(valid)
+            for name, traj, mask in (("prior", prior[0][i, :n], every), ("posterior", recon[i, :n], every),
+                                     ("logged", _logged_traj(item), valid)):
+                coll[name] += scene_collides(traj, item.sizes, mask)
+                agents = off_road_agents(item, traj, mask)
+                off[name][0] += int(agents.sum())
+                off[name][1] += n
+    scenes = len(items)
+    return {
+        "scenes": scenes, "agents": off["logged"][1],
+        "recon_ade_m": float(np.mean(ade)), "recon_fde_m": float(np.mean(fde)),
+        f"prior_min_ade_{samples}_m": float(np.mean(min_ade)),
+        "collision_rate": {k: v / scenes for k, v in coll.items()},
+        "off_road_rate": {k: v[0] / max(v[1], 1) for k, v in off.items()},
+    }
+
+
+def load_traffic_model(path: Path) -> tuple[TrafficModel, FeatureConfig, dict]:
+    from safetensors.torch import load_file
+
+    data = read_sidecar(path, kind=CHECKPOINT_KIND)
+    features = FeatureConfig(**data["features"])
+    model = TrafficModel(TrafficModelConfig(**data["model"]), features.lane_chunks, features.chunk_points)
+    try:
+        model.load_state_dict(load_file(str(Path(path).with_suffix(".safetensors"))))
+    except (RuntimeError, OSError) as err:
+        raise InputError(f"traffic model {path} does not match its config ({err}); train it again "
+                         "with `adversary train-traffic`") from None
+    model.eval()
+    return model, features, data
+
+
+def train_traffic(data: list[Path], out: Path, config: TrainTrafficConfig = TrainTrafficConfig(),
+                  model_config: TrafficModelConfig | None = None,
+                  features: FeatureConfig | None = None, resume: bool = False,
+                  progress: bool = True) -> dict:
+    model_config = model_config or TrafficModelConfig()
+    features = features or FeatureConfig()
+    out = Path(out)
+    if out.exists() and any(out.iterdir()) and not resume:
+        raise InputError(f"--out {out} already holds a run; pass --resume to continue or choose another --out")
+    out.mkdir(parents=True, exist_ok=True)
+    torch.manual_seed(config.seed)
+    rng = np.random.default_rng(config.seed)
+    started = time.perf_counter()
+    train, val = load_windows(data, features, config.val_fraction, config.max_windows_per_episode)
+    model = TrafficModel(model_config, features.lane_chunks, features.chunk_points)
+    optimiser = torch.optim.Adam(model.parameters(), lr=config.lr)
+    first_epoch, best = 0, float("inf")
+    state_path = out / "state.pt"
+    if resume and state_path.exists():
+        state = torch.load(state_path, weights_only=False)
+        model.load_state_dict(state["model"])
+        optimiser.load_state_dict(state["optimiser"])
+        first_epoch, best = state["epoch"] + 1, state["best"]
+        rng = np.random.default_rng([config.seed, first_epoch])
+    meta = {"config": asdict(config), "model": model_config.to_dict(), "features": asdict(features),
+            "data": [str(d) for d in data], "train_scenes": len(train), "val_scenes": len(val)}
+    write_json(out / "run.json", meta)
+    for epoch in range(first_epoch, config.epochs):
+        model.train()
+        losses = []
+        for batch in _batches(train, config.batch_size, rng):
+            loss, parts = training_loss(model, batch, config.kl_weight, config.free_bits)
+            optimiser.zero_grad()
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(model.parameters(), 5.0)
+            optimiser.step()
+            losses.append(parts)
+        metrics = evaluate_model(model, val or train[:64], samples=1, seed=epoch)
+        record = {"epoch": epoch, "train_recon": float(np.mean([p["recon"] for p in losses])),
+                  "train_kl": float(np.mean([p["kl"] for p in losses])),
+                  "val_recon_ade_m": metrics["recon_ade_m"], "val_recon_fde_m": metrics["recon_fde_m"],
+                  "elapsed_s": round(time.perf_counter() - started, 1)}
+        with open(out / "log.jsonl", "a") as log:
+            log.write(json.dumps(record) + "\n")
+        if progress:
+            print(json.dumps(record), flush=True)
+        if metrics["recon_ade_m"] < best:
+            best = metrics["recon_ade_m"]
+            save_checkpoint(out / "best", model, {**meta, "epoch": epoch, "val": metrics},
+                            kind=CHECKPOINT_KIND)
+        tmp = out / "state.pt.tmp"
+        torch.save({"model": model.state_dict(), "optimiser": optimiser.state_dict(), "epoch": epoch,
+                    "best": best}, tmp)
+        tmp.replace(state_path)
+    model, _, _ = load_traffic_model(out / "best")
+    final = evaluate_model(model, val or train[:64], samples=5, seed=config.seed)
+    summary = {**meta, "best_val_recon_ade_m": best, "val": final,
+               "elapsed_s": round(time.perf_counter() - started, 1)}
+    write_json(out / "summary.json", summary)
+    return summary
