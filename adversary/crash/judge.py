@@ -18,7 +18,7 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.interpolate import CubicSpline
+from scipy.interpolate import CubicHermiteSpline
 
 from adversary.crash.scenes import WINDOW_DT_S, SceneRecord, cached_env
 from adversary.solution import ego_only_solution
@@ -58,9 +58,10 @@ def splice_tracks(record: SceneRecord, tracks: np.ndarray, rows) -> HumanLog:
     """A copy of the log, truncated at t0 + horizon, in which the agents of window `rows` follow
     `tracks` [len(rows), F, 6] from t0 on, at the log's rate.
 
-    Between the 2 Hz knots (the logged state at t0, then the track) positions follow a cubic
-    spline in time whose velocity at t0 is the logged one (so the splice has no kink), headings
-    the linearly interpolated unwrapped angle, speeds linear; yaw rates are the headings' finite
+    Between the 2 Hz knots (the logged state at t0, then the track) positions follow the cubic
+    Hermite curve whose velocity at each knot is that knot's speed times heading (the kinematic
+    model's own velocity, so a stop does not overshoot and the splice at t0 has no kink),
+    headings the linearly interpolated unwrapped angle, speeds linear; yaw rates are the headings' finite
     differences as the recorder computes them. The spliced agents are valid over the whole
     horizon (one whose record ended stays on the road); every other agent keeps its record.
     """
@@ -76,8 +77,8 @@ def splice_tracks(record: SceneRecord, tracks: np.ndarray, rows) -> HumanLog:
         agent = int(record.agent_ids[row])
         start = states[agent, k0]
         knots = np.concatenate([start[None], track])
-        v0 = start[4] * start[2:4] / max(np.linalg.norm(start[2:4]), 1e-12)
-        xy = CubicSpline(knots_t, knots[:, :2], bc_type=((1, v0), "not-a-knot"))(fine_t)
+        unit = knots[:, 2:4] / np.maximum(np.linalg.norm(knots[:, 2:4], axis=1, keepdims=True), 1e-12)
+        xy = CubicHermiteSpline(knots_t, knots[:, :2], knots[:, 4:5] * unit)(fine_t)
         angle = np.unwrap(np.arctan2(knots[:, 3], knots[:, 2]))
         heading = np.interp(fine_t, knots_t, angle)
         speed = np.interp(fine_t, knots_t, knots[:, 4])
@@ -194,6 +195,32 @@ def ego_future_2hz(result: Rollout, future_steps: int = 12) -> np.ndarray:
     last = int(np.flatnonzero(result.valid[result.ego])[-1])
     return result.states[result.ego, np.minimum(steps, last)].copy()
 
+
+
+def braking_track(record: SceneRecord, row: int, decel_mps2: float = 8.0, into_ego_lane: bool = False,
+                  shift_s: float = 1.5) -> np.ndarray:
+    """A hand-made adversary [F, 6] for window `row`: from its state at t0 it brakes at
+    `decel_mps2` to a stop along its heading; with `into_ego_lane` it also moves sideways onto
+    the line through the ego's position at t0, linearly over `shift_s` (headings and speeds follow
+    the motion between knots). For tests and examples on straight roads; a learned model
+    generates the real ones."""
+    state = record.window.states[row, record.window.current_index]
+    ego = record.window.states[0, record.window.current_index]
+    heading = state[2:4] / np.linalg.norm(state[2:4])
+    left = np.array([-heading[1], heading[0]])
+    lateral = float((ego[:2] - state[:2]) @ left) if into_ego_lane else 0.0
+    times = WINDOW_DT_S * np.arange(1, record.scene.future_steps + 1)
+    stop_s = state[4] / decel_mps2
+    t = np.minimum(times, stop_s)
+    travelled = state[4] * t - 0.5 * decel_mps2 * t ** 2
+    shift = lateral * np.minimum(times / shift_s, 1.0)
+    xy = state[:2] + travelled[:, None] * heading + shift[:, None] * left
+    step = np.diff(np.vstack([state[:2], xy]), axis=0)
+    moving = np.linalg.norm(step, axis=1) > 1e-6
+    headings = np.tile(heading, (len(times), 1))
+    headings[moving] = step[moving] / np.linalg.norm(step[moving], axis=1, keepdims=True)
+    speed = np.linalg.norm(step, axis=1) / WINDOW_DT_S
+    return np.column_stack([xy, headings, speed, np.zeros(len(times))])
 
 # ---- geometry -------------------------------------------------------------------------------
 
@@ -413,3 +440,43 @@ def judge(record: SceneRecord, tracks: np.ndarray, rows, adversary_row: int, pla
     metrics["min_gap_m"] = gap if np.isfinite(gap) else None       # None: nobody within 40 m
     metrics["rollout_s"] = result.wall_s
     return metrics
+
+
+def handover_offsets(env_id: str, seed: int, episodes: int, specs: tuple[str, ...]) -> dict:
+    """Per SPEC: seconds per rollout (untouched record) and the distance (m) between the ego's
+    closed-loop position at t0 and the human's logged one (the planner drives from t = 0, so by
+    t0 it is no longer where the window's history says), over scenes 0..episodes-1."""
+    from adversary.crash.scenes import AttackScene, record_attack_scene
+
+    records = []
+    for episode in range(episodes):
+        try:
+            records.append(record_attack_scene(AttackScene(env_id, seed, episode)))
+        except InputError:
+            continue
+    out = {"env_id": env_id, "seed": seed, "scenes": len(records)}
+    for spec in specs:
+        planner = cached_planner(spec)
+        seconds, offsets = [], []
+        for record in records:
+            empty = np.zeros((0, record.scene.future_steps, 6))
+            result = rollout(record, empty, [], planner, spec)
+            seconds.append(result.wall_s)
+            here = result.states[result.ego, record.t0_step, :2]
+            offsets.append(float(np.linalg.norm(here - record.log.states[record.log.ego_id, record.t0_step, :2])))
+        out[spec] = {"seconds_per_rollout_mean": float(np.mean(seconds)),
+                     "t0_offset_m_mean": float(np.mean(offsets)), "t0_offset_m_max": float(np.max(offsets))}
+    return out
+
+
+if __name__ == "__main__":
+    import argparse
+    import json
+
+    parser = argparse.ArgumentParser(description="Rollout speed and the ego's offset from its log at t0.")
+    parser.add_argument("--env", default="highway-v0")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--episodes", type=int, default=10)
+    parser.add_argument("--planners", nargs="+", default=["replay", "idm", "riskmap:checkpoints/riskmap_highway"])
+    args = parser.parse_args()
+    print(json.dumps(handover_offsets(args.env, args.seed, args.episodes, tuple(args.planners)), indent=1))
