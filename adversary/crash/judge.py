@@ -190,7 +190,7 @@ def rollout(record: SceneRecord, tracks: np.ndarray, rows, planner, planner_spec
 def ego_future_2hz(result: Rollout, future_steps: int = 12) -> np.ndarray:
     """The ego's closed-loop states [future_steps, 6] at t0 + 0.5 ... t0 + 0.5 * future_steps;
     past the end of the rollout (the ego left the road) its last state is repeated."""
-    stride = int(round(WINDOW_DT_S / result.dt_s))
+    stride = round(WINDOW_DT_S / result.dt_s)
     steps = result.t0_step + stride * np.arange(1, future_steps + 1)
     last = int(np.flatnonzero(result.valid[result.ego])[-1])
     return result.states[result.ego, np.minimum(steps, last)].copy()
@@ -327,7 +327,7 @@ def _ego_accelerations(result: Rollout, end_step: int) -> tuple[float, float]:
     ACCEL_WINDOW_S before `end_step`: the first from the speed's finite differences (negative =
     braking), the second from the velocity vector's (it includes the lateral part)."""
     ego = result.ego
-    start = max(0, end_step - int(round(ACCEL_WINDOW_S / result.dt_s)))
+    start = max(0, end_step - round(ACCEL_WINDOW_S / result.dt_s))
     seg = result.states[ego, start:end_step + 1][result.valid[ego, start:end_step + 1]]
     if len(seg) < 2:
         return 0.0, 0.0
@@ -429,7 +429,7 @@ def judge(record: SceneRecord, tracks: np.ndarray, rows, adversary_row: int, pla
         v_ego = s[ego, k_coll, 4] * s[ego, k_coll, 2:4]
         v_adv = s[adv, k_coll, 4] * s[adv, k_coll, 2:4]
         metrics["kinematic_value_mps"] = float(np.linalg.norm(v_ego - v_adv))
-        lo = max(0, k_coll - int(round(CUT_IN_LOOKBACK_S / dt)))
+        lo = max(0, k_coll - round(CUT_IN_LOOKBACK_S / dt))
         both = result.valid[ego, lo:k_coll + 1] & result.valid[adv, lo:k_coll + 1]
         metrics["collision_type"] = classify_collision(s[ego, lo:k_coll + 1][both], s[adv, lo:k_coll + 1][both],
                                                        result.sizes[ego], result.sizes[adv])

@@ -48,7 +48,7 @@ def save_attack_panel(record: SceneRecord, tracks: np.ndarray, rows, adversary_r
     end = k0 + stride * record.scene.future_steps
     row_ids = rollout.row_ids(record)
     ego_rec = rollout.ego
-    coll_step = (int(round(metrics["collision_time_s"] / rollout.dt_s)) if metrics["collision"]
+    coll_step = (round(metrics["collision_time_s"] / rollout.dt_s) if metrics["collision"]
                  else int(np.flatnonzero(rollout.valid[ego_rec])[-1]))
 
     # Crop: the ego's path and the adversary's with a margin, widened to a readable height; the

@@ -52,7 +52,7 @@ class AttackScene:
     @property
     def future_steps(self) -> int:
         """Window steps after the current one (12 for the default horizon)."""
-        return int(round(self.horizon_s / WINDOW_DT_S))
+        return round(self.horizon_s / WINDOW_DT_S)
 
     def check(self, control_hz: int) -> None:
         family_of_env(self.env_id)      # InputError naming the supported envs
@@ -79,12 +79,12 @@ class SceneRecord:
     @property
     def t0_step(self) -> int:
         """The log step of t0."""
-        return int(round(self.scene.t0_s / self.log.dt_s))
+        return round(self.scene.t0_s / self.log.dt_s)
 
     @property
     def stride(self) -> int:
         """Log steps per window step."""
-        return int(round(WINDOW_DT_S / self.log.dt_s))
+        return round(WINDOW_DT_S / self.log.dt_s)
 
 
 def window_rows(log: HumanLog, step: int, radius_m: float, max_agents: int) -> np.ndarray:
@@ -101,8 +101,8 @@ def window_rows(log: HumanLog, step: int, radius_m: float, max_agents: int) -> n
 def window_of(log: HumanLog, agent_ids: np.ndarray, step: int, future_steps: int,
               lanes: tuple[Lane, ...], route_xy: np.ndarray | None, source: str) -> Scene:
     """The 2 Hz Scene of `agent_ids` around log `step` (times outside the log are invalid)."""
-    stride = int(round(WINDOW_DT_S / log.dt_s))
-    n_hist = int(round(HISTORY_S / WINDOW_DT_S))
+    stride = round(WINDOW_DT_S / log.dt_s)
+    n_hist = round(HISTORY_S / WINDOW_DT_S)
     times = step + stride * np.arange(-n_hist, future_steps + 1)
     inside = (times >= 0) & (times < log.num_steps)
     clipped = np.clip(times, 0, log.num_steps - 1)
@@ -127,7 +127,7 @@ def record_attack_scene(scene: AttackScene, control_hz: int = 10, radius_m: floa
         raise InputError(f"max_agents={max_agents} must be >= 2 and radius_m={radius_m} positive")
     env = cached_env(scene.env_id, control_hz) if env is None else env
     run = Episode(env, scene.env_id, scene.scene_seed, scene.episode, control_hz)
-    total = int(round((scene.t0_s + scene.horizon_s) * control_hz))
+    total = round((scene.t0_s + scene.horizon_s) * control_hz)
     for _ in range(total):
         run.step()
         if run.done:
@@ -138,7 +138,7 @@ def record_attack_scene(scene: AttackScene, control_hz: int = 10, radius_m: floa
         what = "crashed" if log.crashed else "left the road"
         raise InputError(f"{where}: the human {what} at {run.time_s:.1f} s, before t0 + horizon = "
                          f"{scene.t0_s + scene.horizon_s:.1f} s; pick another episode or an earlier t0_s")
-    step = int(round(scene.t0_s * control_hz))
+    step = round(scene.t0_s * control_hz)
     agent_ids = window_rows(log, step, radius_m, max_agents)
     if len(agent_ids) < 2:
         raise InputError(f"{where}: no other vehicle within {radius_m} m of the ego at t0 = "
@@ -196,6 +196,6 @@ def load_record(path: Path) -> SceneRecord:
         for a, b, lines, width, start in zip(offsets[:-1], offsets[1:], d["lane_lines"],
                                              d["lane_width_m"], d["lane_start_s"]))
     route = d["route_xy"] if bool(d["has_route"]) else None
-    step = int(round(scene.t0_s / log.dt_s))
+    step = round(scene.t0_s / log.dt_s)
     window = window_of(log, d["agent_ids"], step, scene.future_steps, lanes, route, scene.env_id)
     return SceneRecord(scene, log, window, d["agent_ids"].astype(np.int64))

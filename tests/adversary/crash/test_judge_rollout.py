@@ -5,8 +5,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from adversary.crash.judge import (braking_track, cached_planner, ego_future_2hz, judge, rollout,
-                                   splice_tracks)
+from adversary.crash.judge import braking_track, cached_planner, ego_future_2hz, judge, rollout, splice_tracks
 from adversary.crash.scenes import AttackScene, record_attack_scene
 from rasterize.errors import InputError
 
