@@ -32,6 +32,8 @@ OFF_ROAD_FRACTION = 0.05        # STRIVE: off-road when more than this share of 
 ACCEL_WINDOW_S = 2.0            # ego acceleration is measured over this long before the collision
 CUT_IN_LOOKBACK_S = 3.0         # a cut-in adversary was beside the ego within this long before
 GAP_RADIUS_M = 40.0             # others farther (centre distance) do not count for the min gap
+# Accelerations tried with a lane change in the solution check (with the default set along the path).
+SOLUTION_LATERAL_ACCELS_MPS2 = (-6.0, -3.0, 0.0, 2.0)
 COLLISION_TYPES = ("ego rear-ends", "ego rear-ended", "cut-in", "side-swipe", "head-on", "T-bone")
 
 
@@ -370,7 +372,9 @@ def judge(record: SceneRecord, tracks: np.ndarray, rows, adversary_row: int, pla
       the collision (before the end of the rollout without one).
     collision_type: `classify_collision` over the 3 s before the collision (None without one).
     solution_found: STRIVE's solution check (`adversary.solution.ego_only_solution` on the
-      rollout: could the ego alone, from 3 s before, have avoided every box); None without one.
+      rollout: could the ego alone, from 3 s before, have avoided every box): along its own path
+      with constant accelerations (solution_found_longitudinal), or moving one lane width left or
+      right within 2 s while staying on the road; None without a collision.
     ego_progress_m: distance the ego drove from t0 to the collision (to the end without one);
     min_gap_m: smallest box gap between the ego and any vehicle within 40 m over the same span.
     """
@@ -421,6 +425,7 @@ def judge(record: SceneRecord, tracks: np.ndarray, rows, adversary_row: int, pla
         "adversary_off_road": adv_frac > OFF_ROAD_FRACTION, "adversary_off_road_max": adv_frac,
         "other_off_road": other_frac > OFF_ROAD_FRACTION, "other_off_road_max": other_frac,
         "kinematic_value_mps": None, "collision_type": None, "solution_found": None,
+        "solution_found_longitudinal": None,
         "ego_off_road": bool(result.drive["off_road"]),
     }
     metrics["ego_min_accel_mps2"], metrics["ego_max_abs_accel_mps2"] = _ego_accelerations(result, end)
@@ -433,7 +438,17 @@ def judge(record: SceneRecord, tracks: np.ndarray, rows, adversary_row: int, pla
         both = result.valid[ego, lo:k_coll + 1] & result.valid[adv, lo:k_coll + 1]
         metrics["collision_type"] = classify_collision(s[ego, lo:k_coll + 1][both], s[adv, lo:k_coll + 1][both],
                                                        result.sizes[ego], result.sizes[adv])
-        metrics["solution_found"] = bool(ego_only_solution(s, result.valid, result.sizes, ego, k_coll, dt))
+        longitudinal = ego_only_solution(s, result.valid, result.sizes, ego, k_coll, dt)
+        lane_m = float(np.median([lane.width_m for lane in record.window.lanes])) if record.window.lanes else 4.0
+
+        def on_road(centre, heading, length, width):
+            state = np.array([*centre, *heading])
+            return off_road_fraction(state, (length, width), area) <= OFF_ROAD_FRACTION
+
+        metrics["solution_found_longitudinal"] = bool(longitudinal)
+        metrics["solution_found"] = bool(longitudinal) or bool(ego_only_solution(
+            s, result.valid, result.sizes, ego, k_coll, dt, accels_mps2=SOLUTION_LATERAL_ACCELS_MPS2,
+            lateral_offsets_m=(lane_m, -lane_m), on_road=on_road))
     path = result.states[ego, k0:end + 1, :2][result.valid[ego, k0:end + 1]]
     metrics["ego_progress_m"] = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
     gap = _min_gap(result, k0, end)
