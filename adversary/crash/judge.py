@@ -375,6 +375,8 @@ def judge(record: SceneRecord, tracks: np.ndarray, rows, adversary_row: int, pla
       rollout: could the ego alone, from 3 s before, have avoided every box): along its own path
       with constant accelerations (solution_found_longitudinal), or moving one lane width left or
       right within 2 s while staying on the road; None without a collision.
+    ego_off_road: the episode's own check (the ego off every lane, once a second) at any time of
+      the rollout, after a collision too.
     ego_progress_m: distance the ego drove from t0 to the collision (to the end without one);
     min_gap_m: smallest box gap between the ego and any vehicle within 40 m over the same span.
     """

@@ -28,8 +28,8 @@ def _title_line(metrics: dict) -> str:
     else:
         gap = metrics["min_gap_m"]
         what = "no collision" + (f", min gap {gap:.1f} m" if gap is not None else "")
-    off = [name for name, key in (("adversary", "adversary_off_road"), ("other", "other_off_road"))
-           if metrics[key]]
+    off = [name for name, key in (("adversary", "adversary_off_road"), ("other", "other_off_road"),
+                                  ("ego", "ego_off_road")) if metrics[key]]
     return (f"{metrics['planner']}: {what}; ego min accel {metrics['ego_min_accel_mps2']:.1f} m/s²"
             + (f"; off road: {', '.join(off)}" if off else ""))
 
@@ -95,7 +95,7 @@ def save_attack_panel(record: SceneRecord, tracks: np.ndarray, rows, adversary_r
         point = 0.5 * (ego_state[:2] + adv_state[:2])
         ax.plot(*point, marker="*", color="black", markersize=14, zorder=7, label="collision")
     ax.plot([], [], color=_GREY, linewidth=2, label="past 2 s")
-    ax.plot([], [], color=_BLUE, label="generated others")
+    ax.plot([], [], color=_BLUE, label="others' futures")
     ax.plot([], [], color=_RED, linewidth=2, label="adversary")
 
     ax.set_xlim(lo[0], hi[0])
@@ -107,7 +107,7 @@ def save_attack_panel(record: SceneRecord, tracks: np.ndarray, rows, adversary_r
     when = f"boxes at {coll_step * rollout.dt_s:.1f} s"
     ax.set_title(f"{title} ({when})\n{_title_line(metrics)}", fontsize=9)
     fig.tight_layout()
-    atomic_write(Path(path), lambda f: fig.savefig(f, format="png"))
+    atomic_write(Path(path), lambda f: fig.savefig(f, format="png", bbox_inches="tight"))
     plt.close(fig)
 
 

@@ -73,3 +73,9 @@ def test_a_scene_without_neighbours_is_an_input_error(highway):
     with pytest.raises(InputError, match="no other vehicle"):
         record_attack_scene(highway.scene, radius_m=1.0)
 
+
+
+def test_a_human_that_crashes_before_the_horizon_ends_is_an_input_error():
+    # intersection-v0 seed 0 episode 3: the human crashes at 6 s.
+    with pytest.raises(InputError, match="crashed"):
+        record_attack_scene(AttackScene("intersection-v0", 0, 3))
