@@ -252,7 +252,8 @@ def drivable_area(lanes):
 def off_road_fraction(state: np.ndarray, size: np.ndarray, area) -> float:
     """Share of the box's area outside the drivable `area` (0 on the road, 1 fully off)."""
     box = box_polygon(state, size)
-    return float(1.0 - box.intersection(area).area / box.area)
+    outside = float(1.0 - box.intersection(area).area / box.area)
+    return outside if outside > 1e-9 else 0.0      # no rounding noise for boxes on the road
 
 
 # ---- collision type -------------------------------------------------------------------------
