@@ -1,0 +1,500 @@
+"""Judge an attack: splice generated futures into the record, drive a planner against them, score.
+
+Generated tracks are 2 Hz future states [R, F, 6] (world frame: x, y, heading_x, heading_y,
+speed, yaw_rate; F = horizon / 0.5 s, t0 + 0.5 ... t0 + horizon) of window rows `rows` (never the
+ego, row 0). `splice_tracks` puts them into a copy of the human's 10 Hz log; `rollout` drives a
+planner (SPEC, `riskmap.registry`) in closed loop against the spliced log exactly as
+`riskmap evaluate --mode log` does (every other vehicle replays its record, the ego is handed to
+the planner at t = 0; `replay` plays the human back); `judge` computes STRIVE's metrics.
+
+The rollout ignores highway-env's own contact response for the ego (it would push the ego out of
+the other box and end the episode at the first touch): collisions are judged on box overlap
+(IoU > 0.02), as STRIVE defines them, over the whole horizon.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.interpolate import CubicHermiteSpline
+
+from adversary.crash.scenes import WINDOW_DT_S, SceneRecord, cached_env
+from adversary.solution import ego_only_solution
+from rasterize.errors import InputError
+from rasterize.frames import box_corners
+from rasterize.geometry import box_gap
+from riskmap.log_replay import HumanLog
+
+COLLISION_IOU = 0.02            # STRIVE: a collision is a box IoU above this
+OFF_ROAD_FRACTION = 0.05        # STRIVE: off-road when more than this share of the box is off
+ACCEL_WINDOW_S = 2.0            # ego acceleration is measured over this long before the collision
+CUT_IN_LOOKBACK_S = 3.0         # a cut-in adversary was beside the ego within this long before
+GAP_RADIUS_M = 40.0             # others farther (centre distance) do not count for the min gap
+# Accelerations tried with a lane change in the solution check (with the default set along the path).
+SOLUTION_LATERAL_ACCELS_MPS2 = (-6.0, -3.0, 0.0, 2.0)
+COLLISION_TYPES = ("ego rear-ends", "ego rear-ended", "cut-in", "side-swipe", "head-on", "T-bone")
+
+
+def _wrap(angle):
+    return (np.asarray(angle) + np.pi) % (2 * np.pi) - np.pi
+
+
+def _check_tracks(record: SceneRecord, tracks: np.ndarray, rows) -> tuple[np.ndarray, np.ndarray]:
+    tracks = np.asarray(tracks, dtype=np.float64)
+    rows = np.asarray(rows, dtype=np.int64).reshape(-1)
+    steps = record.scene.future_steps
+    if tracks.shape != (len(rows), steps, 6):
+        raise InputError(f"tracks must have shape [len(rows)={len(rows)}, {steps}, 6], got {tracks.shape}")
+    if not np.isfinite(tracks).all():
+        raise InputError("tracks hold non-finite values; check the generator's output")
+    n = len(record.agent_ids)
+    if (rows <= 0).any() or (rows >= n).any() or len(set(rows.tolist())) != len(rows):
+        raise InputError(f"rows {rows.tolist()} must be distinct window rows 1..{n - 1} (row 0 is the "
+                         "ego, which the planner drives)")
+    return tracks, rows
+
+
+def splice_tracks(record: SceneRecord, tracks: np.ndarray, rows) -> HumanLog:
+    """A copy of the log, truncated at t0 + horizon, in which the agents of window `rows` follow
+    `tracks` [len(rows), F, 6] from t0 on, at the log's rate.
+
+    Between the 2 Hz knots (the logged state at t0, then the track) positions follow the cubic
+    Hermite curve whose velocity at each knot is that knot's speed times heading (the kinematic
+    model's own velocity, so a stop does not overshoot and the splice at t0 has no kink),
+    headings the linearly interpolated unwrapped angle, speeds linear; yaw rates are the headings' finite
+    differences as the recorder computes them. The spliced agents are valid over the whole
+    horizon (one whose record ended stays on the road); every other agent keeps its record.
+    """
+    tracks, rows = _check_tracks(record, tracks, rows)
+    log, k0, stride = record.log, record.t0_step, record.stride
+    end = k0 + stride * record.scene.future_steps + 1
+    if log.num_steps < end:
+        raise InputError(f"the record has {log.num_steps} steps, the horizon needs {end}")
+    states, valid = log.states[:, :end].copy(), log.valid[:, :end].copy()
+    knots_t = WINDOW_DT_S * np.arange(record.scene.future_steps + 1)
+    fine_t = log.dt_s * np.arange(end - k0)
+    for row, track in zip(rows, tracks):
+        agent = int(record.agent_ids[row])
+        start = states[agent, k0]
+        knots = np.concatenate([start[None], track])
+        unit = knots[:, 2:4] / np.maximum(np.linalg.norm(knots[:, 2:4], axis=1, keepdims=True), 1e-12)
+        xy = CubicHermiteSpline(knots_t, knots[:, :2], knots[:, 4:5] * unit)(fine_t)
+        angle = np.unwrap(np.arctan2(knots[:, 3], knots[:, 2]))
+        heading = np.interp(fine_t, knots_t, angle)
+        speed = np.interp(fine_t, knots_t, knots[:, 4])
+        yaw_rate = np.concatenate([[start[5]], np.diff(heading) / log.dt_s])
+        spliced = np.column_stack([xy, np.cos(heading), np.sin(heading), speed, yaw_rate])
+        knot_steps = stride * np.arange(1, record.scene.future_steps + 1)
+        spliced[knot_steps] = track           # the knots exactly as generated
+        spliced[0] = start
+        states[agent, k0:end] = spliced
+        valid[agent, k0:end] = True
+    return HumanLog(states, valid, log.sizes.copy(), log.kinds.copy(), log.ego_id, log.dt_s,
+                    log.crashed, log.off_road)
+
+
+@dataclass(frozen=True, eq=False)
+class Rollout:
+    """One closed-loop drive of the spliced log.
+
+    states [A, S, 6], valid [A, S], sizes [A, 2]: every vehicle's recorded 10 Hz states (recorder
+    ids; S = (t0 + horizon) * 10 + 1 unless the ego left the road earlier); ego: the ego's recorder
+    id; log_ids [A]: the log agent each recorder agent replays (the ego: the log's ego; -1 none).
+    """
+
+    states: np.ndarray
+    valid: np.ndarray
+    sizes: np.ndarray
+    ego: int
+    log_ids: np.ndarray
+    dt_s: float
+    t0_step: int
+    planner_spec: str
+    drive: dict            # drive_episode's record (off_road, distance_m, plan times, ...)
+    wall_s: float
+
+    def recorder_id(self, log_id: int) -> int:
+        """The recorder agent replaying log agent `log_id` (-1 if it never was on the road)."""
+        hits = np.flatnonzero(self.log_ids == log_id)
+        return int(hits[0]) if len(hits) else -1
+
+    def row_ids(self, record: SceneRecord) -> np.ndarray:
+        """Recorder id [N] of each window row (row 0: the ego)."""
+        return np.array([self.recorder_id(int(a)) for a in record.agent_ids], dtype=np.int64)
+
+
+_PLANNERS: dict = {}
+
+
+def cached_planner(spec: str, seed: int = 0):
+    """One planner per SPEC and process (loading a checkpoint costs seconds; planners are reset
+    per episode, so reuse does not change results)."""
+    from riskmap.registry import make_planner
+
+    if (spec, seed) not in _PLANNERS:
+        _PLANNERS[spec, seed] = make_planner(spec, seed=seed)
+    return _PLANNERS[spec, seed]
+
+
+def _no_contact_response(run) -> None:
+    # highway-env would push the ego out of any box it touches and stop the episode; STRIVE
+    # judges overlap, so the ego passes through and the boxes are measured.
+    run.ego.collidable = False
+
+
+def _match_log_ids(states: np.ndarray, valid: np.ndarray, ego: int, log: HumanLog) -> np.ndarray:
+    """Log agent of each recorder agent: the one at the same place at its first recorded step."""
+    log_ids = np.full(len(states), -1, dtype=np.int64)
+    log_ids[ego] = log.ego_id
+    for agent in range(len(states)):
+        if agent == ego or not valid[agent].any():
+            continue
+        k = int(np.argmax(valid[agent]))
+        candidates = np.flatnonzero(log.valid[:, k])
+        dist = np.abs(log.states[candidates, k, :2] - states[agent, k, :2]).max(axis=1)
+        if len(dist) and dist.min() < 1e-6:
+            log_ids[agent] = candidates[int(np.argmin(dist))]
+    return log_ids
+
+
+def rollout(record: SceneRecord, tracks: np.ndarray, rows, planner, planner_spec: str,
+            control_hz: int = 10, replan_hz: int = 2) -> Rollout:
+    """Drive `planner` (made from `planner_spec`) against the log spliced with `tracks` at `rows`
+    (module docstring). Empty `rows` (tracks [0, F, 6]) drives against the untouched record."""
+    from riskmap.drive import DriveConfig, DriveHooks, drive_episode
+    from riskmap.log_replay import LogReplayEpisode, ReplayPlanner
+
+    started = time.perf_counter()
+    scene = record.scene
+    if abs(1.0 / control_hz - record.log.dt_s) > 1e-9:
+        raise InputError(f"control_hz={control_hz} differs from the record's {1 / record.log.dt_s:g} Hz")
+    log = splice_tracks(record, tracks, rows)
+    env = cached_env(scene.env_id, control_hz)
+    replay = isinstance(planner, ReplayPlanner)
+    if replay:
+        planner.set_log(log)          # the ego's own record is never spliced
+    run = LogReplayEpisode(env, scene.env_id, scene.scene_seed, scene.episode, log, control_hz,
+                           replay_ego=replay)
+    config = DriveConfig(scene.env_id, 1, scene.scene_seed, control_hz, replan_hz,
+                         episode_s=(log.num_steps - 1) * log.dt_s)
+    drive = drive_episode(env, planner, config, scene.episode, run=run,
+                          hooks=DriveHooks(on_ready=(_no_contact_response,)))
+    states, valid, sizes, _ = run.recorder.arrays()
+    n = len(sizes)        # the recorder's arrays may carry empty rows for adopted vehicles
+    states, valid = states[:n].copy(), valid[:n].copy()
+    ego = run.recorder.ego_id
+    return Rollout(states, valid, sizes.copy(), ego, _match_log_ids(states, valid, ego, log), log.dt_s,
+                   record.t0_step, planner_spec, drive, time.perf_counter() - started)
+
+
+def ego_future_2hz(result: Rollout, future_steps: int = 12) -> np.ndarray:
+    """The ego's closed-loop states [future_steps, 6] at t0 + 0.5 ... t0 + 0.5 * future_steps;
+    past the end of the rollout (the ego left the road) its last state is repeated."""
+    stride = round(WINDOW_DT_S / result.dt_s)
+    steps = result.t0_step + stride * np.arange(1, future_steps + 1)
+    last = int(np.flatnonzero(result.valid[result.ego])[-1])
+    return result.states[result.ego, np.minimum(steps, last)].copy()
+
+
+
+def braking_track(record: SceneRecord, row: int, decel_mps2: float = 8.0, into_ego_lane: bool = False,
+                  shift_s: float = 1.5) -> np.ndarray:
+    """A hand-made adversary [F, 6] for window `row`: from its state at t0 it brakes at
+    `decel_mps2` to a stop along its heading; with `into_ego_lane` it also moves sideways onto
+    the line through the ego's position at t0, linearly over `shift_s` (headings and speeds follow
+    the motion between knots). For tests and examples on straight roads; a learned model
+    generates the real ones."""
+    state = record.window.states[row, record.window.current_index]
+    ego = record.window.states[0, record.window.current_index]
+    heading = state[2:4] / np.linalg.norm(state[2:4])
+    left = np.array([-heading[1], heading[0]])
+    lateral = float((ego[:2] - state[:2]) @ left) if into_ego_lane else 0.0
+    times = WINDOW_DT_S * np.arange(1, record.scene.future_steps + 1)
+    stop_s = state[4] / decel_mps2
+    t = np.minimum(times, stop_s)
+    travelled = state[4] * t - 0.5 * decel_mps2 * t ** 2
+    shift = lateral * np.minimum(times / shift_s, 1.0)
+    xy = state[:2] + travelled[:, None] * heading + shift[:, None] * left
+    step = np.diff(np.vstack([state[:2], xy]), axis=0)
+    moving = np.linalg.norm(step, axis=1) > 1e-6
+    headings = np.tile(heading, (len(times), 1))
+    headings[moving] = step[moving] / np.linalg.norm(step[moving], axis=1, keepdims=True)
+    speed = np.linalg.norm(step, axis=1) / WINDOW_DT_S
+    return np.column_stack([xy, headings, speed, np.zeros(len(times))])
+
+# ---- geometry -------------------------------------------------------------------------------
+
+def box_polygon(state: np.ndarray, size: np.ndarray):
+    """The shapely polygon of a vehicle box: state [>=4] (x, y, heading_x, heading_y), size (l, w)."""
+    from shapely.geometry import Polygon
+
+    return Polygon(box_corners(state[:2], state[2:4], float(size[0]), float(size[1])))
+
+
+def box_iou(state_a: np.ndarray, size_a: np.ndarray, state_b: np.ndarray, size_b: np.ndarray) -> float:
+    """Intersection over union of two vehicle boxes."""
+    a, b = box_polygon(state_a, size_a), box_polygon(state_b, size_b)
+    inter = a.intersection(b).area
+    return float(inter / (a.area + b.area - inter)) if inter > 0 else 0.0
+
+
+def drivable_area(lanes):
+    """Union of the lanes' polygons (shapely); curved lanes whose outline crosses itself are
+    repaired first."""
+    from shapely import make_valid, unary_union
+    from shapely.geometry import Polygon
+
+    return unary_union([make_valid(Polygon(lane.polygon())) for lane in lanes])
+
+
+def off_road_fraction(state: np.ndarray, size: np.ndarray, area) -> float:
+    """Share of the box's area outside the drivable `area` (0 on the road, 1 fully off)."""
+    box = box_polygon(state, size)
+    outside = float(1.0 - box.intersection(area).area / box.area)
+    return outside if outside > 1e-9 else 0.0      # no rounding noise for boxes on the road
+
+
+# ---- collision type -------------------------------------------------------------------------
+
+def _in_frame(ego_state: np.ndarray, point: np.ndarray) -> tuple[float, float]:
+    """(forward, left) of `point` in the frame of `ego_state` (x, y, heading_x, heading_y, ...)."""
+    h = ego_state[2:4] / max(np.linalg.norm(ego_state[2:4]), 1e-12)
+    d = point - ego_state[:2]
+    return float(d @ h), float(-d[0] * h[1] + d[1] * h[0])
+
+
+def classify_collision(ego_track: np.ndarray, adv_track: np.ndarray, ego_size: np.ndarray,
+                       adv_size: np.ndarray) -> str:
+    """Type of the collision at the last step of ego_track / adv_track [K, 6] (the steps leading
+    up to it, e.g. the last CUT_IN_LOOKBACK_S; only the last one is needed for all but cut-in).
+
+    With dpsi the adversary's heading relative to the ego's and (forward, lateral) the
+    adversary's centre in the ego's frame at the collision:
+    - head-on: |dpsi| > 120 deg;
+    - T-bone: 60 deg <= |dpsi| <= 120 deg;
+    - otherwise (same direction), cut-in: the adversary is ahead (forward > 0) and at some earlier
+      step of the tracks it was beside the ego's path, |lateral| >= (w_ego + w_adv) / 2 in the
+      ego's frame of that step, i.e. it came into the ego's lane from another;
+    - otherwise ego rear-ends / ego rear-ended: the boxes meet through their fronts / rears: the
+      longitudinal penetration (l_ego + l_adv) / 2 - |forward| is at most the lateral one
+      (w_ego + w_adv) / 2 - |lateral|; "ego rear-ends" when the adversary is ahead;
+    - otherwise side-swipe (the boxes meet through their sides).
+    """
+    ego, adv = ego_track[-1], adv_track[-1]
+    dpsi = abs(float(_wrap(np.arctan2(adv[3], adv[2]) - np.arctan2(ego[3], ego[2]))))
+    if dpsi > np.radians(120):
+        return "head-on"
+    if dpsi >= np.radians(60):
+        return "T-bone"
+    forward, lateral = _in_frame(ego, adv[:2])
+    half_widths = 0.5 * (float(ego_size[1]) + float(adv_size[1]))
+    if forward > 0 and any(abs(_in_frame(e, a[:2])[1]) >= half_widths
+                           for e, a in zip(ego_track[:-1], adv_track[:-1])):
+        return "cut-in"
+    long_pen = 0.5 * (float(ego_size[0]) + float(adv_size[0])) - abs(forward)
+    lat_pen = half_widths - abs(lateral)
+    if long_pen <= lat_pen:
+        return "ego rear-ends" if forward > 0 else "ego rear-ended"
+    return "side-swipe"
+
+
+# ---- metrics --------------------------------------------------------------------------------
+
+def _first_collision(result: Rollout, ego: int, others: list[int], from_step: int
+                     ) -> tuple[int | None, int | None, float]:
+    """(step, recorder agent, IoU) of the first step >= from_step at which the ego's box overlaps
+    one of `others` with IoU > COLLISION_IOU; (None, None, max IoU seen) if never."""
+    s, v = result.states, result.valid
+    reach = 0.5 * (np.hypot(*result.sizes[ego]) + np.hypot(result.sizes[:, 0], result.sizes[:, 1]))
+    best = 0.0
+    for k in range(from_step, s.shape[1]):
+        if not v[ego, k]:
+            continue
+        hits = []
+        for a in others:
+            if v[a, k] and np.linalg.norm(s[a, k, :2] - s[ego, k, :2]) < reach[a]:
+                iou = box_iou(s[ego, k], result.sizes[ego], s[a, k], result.sizes[a])
+                best = max(best, iou)
+                if iou > COLLISION_IOU:
+                    hits.append((iou, a))
+        if hits:
+            iou, a = max(hits)
+            return k, a, iou
+    return None, None, best
+
+
+def _ego_accelerations(result: Rollout, end_step: int) -> tuple[float, float]:
+    """(min longitudinal acceleration, max |acceleration vector|), m/s², over the
+    ACCEL_WINDOW_S before `end_step`: the first from the speed's finite differences (negative =
+    braking), the second from the velocity vector's (it includes the lateral part)."""
+    ego = result.ego
+    start = max(0, end_step - round(ACCEL_WINDOW_S / result.dt_s))
+    seg = result.states[ego, start:end_step + 1][result.valid[ego, start:end_step + 1]]
+    if len(seg) < 2:
+        return 0.0, 0.0
+    velocity = seg[:, 4:5] * seg[:, 2:4]
+    along = np.diff(seg[:, 4]) / result.dt_s
+    vector = np.linalg.norm(np.diff(velocity, axis=0), axis=1) / result.dt_s
+    return float(along.min()), float(vector.max())
+
+
+def _min_gap(result: Rollout, from_step: int, to_step: int) -> float:
+    s, v, ego = result.states, result.valid, result.ego
+    gaps = []
+    for k in range(from_step, to_step + 1):
+        if not v[ego, k]:
+            continue
+        mine = box_corners(s[ego, k, :2], s[ego, k, 2:4], *result.sizes[ego])
+        for a in np.flatnonzero(v[:, k]):
+            if a != ego and np.linalg.norm(s[a, k, :2] - s[ego, k, :2]) < GAP_RADIUS_M:
+                gaps.append(box_gap(mine, box_corners(s[a, k, :2], s[a, k, 2:4], *result.sizes[a])))
+    return float(min(gaps, default=float("inf")))
+
+
+def judge(record: SceneRecord, tracks: np.ndarray, rows, adversary_row: int, planner,
+          planner_spec: str, result: Rollout | None = None) -> dict:
+    """STRIVE's metrics of one attack (JSON-ready); `result`: a rollout of these tracks already
+    driven (else one is driven here). Times are seconds of the episode (t0 = scene.t0_s).
+
+    collision / collision_time_s / collision_iou: the ego's box overlaps the adversary's with IoU
+      > 0.02 at some 10 Hz step from t0 on (the first such step; collision_iou is the IoU there,
+      or the largest IoU seen without a collision); collision_any (_time_s, _row):
+      the same with any vehicle (row -1: a vehicle outside the window); collision_before_t0: the
+      planner already hit something before the attack started (the attack is then moot).
+    adversary_off_road / other_off_road: more than 5% of the box outside the union of the
+      window's lane polygons at some 2 Hz step t0 + 0.5 ... up to the collision (the whole
+      horizon without one); "other": every window row but the ego and the adversary, at its
+      spliced (generated or logged) state. adversary_off_road_max / other_off_road_max: the
+      largest fractions seen.
+    kinematic_value_mps: |v_ego - v_adv| (velocity vectors) at the collision (None without one).
+    ego_min_accel_mps2 / ego_max_abs_accel_mps2: see `_ego_accelerations`, over the 2 s before
+      the collision (before the end of the rollout without one).
+    collision_type: `classify_collision` over the 3 s before the collision (None without one).
+    solution_found: STRIVE's solution check (`adversary.solution.ego_only_solution` on the
+      rollout: could the ego alone, from 3 s before, have avoided every box): along its own path
+      with constant accelerations (solution_found_longitudinal), or moving one lane width left or
+      right within 2 s while staying on the road; None without a collision.
+    ego_off_road: the episode's own check (the ego off every lane, once a second) at any time of
+      the rollout, after a collision too.
+    ego_progress_m: distance the ego drove from t0 to the collision (to the end without one);
+    min_gap_m: smallest box gap between the ego and any vehicle within 40 m over the same span.
+    """
+    tracks, rows = _check_tracks(record, tracks, rows)
+    if not 0 < adversary_row < len(record.agent_ids):
+        raise InputError(f"adversary_row={adversary_row} must be a window row 1..{len(record.agent_ids) - 1}")
+    if result is None:
+        result = rollout(record, tracks, rows, planner, planner_spec)
+    ego, dt, k0 = result.ego, result.dt_s, result.t0_step
+    row_ids = result.row_ids(record)
+    adv = int(row_ids[adversary_row])
+    if adv < 0:
+        raise InputError(f"adversary_row={adversary_row} never appeared in the rollout")
+    everyone = [a for a in range(len(result.sizes)) if a != ego]
+    k_coll, _, iou = _first_collision(result, ego, [adv], k0)
+    k_any, with_any, _ = _first_collision(result, ego, everyone, k0)
+    k_before, _, _ = _first_collision(result, ego, everyone, 0) if k0 > 0 else (None, None, 0)
+    last = int(np.flatnonzero(result.valid[ego])[-1])
+    end = k_coll if k_coll is not None else last
+
+    # Off-road at the 2 Hz steps of the generated horizon up to the collision.
+    spliced = splice_tracks(record, tracks, rows)
+    area = drivable_area(record.window.lanes)
+    stride = record.stride
+    knot_steps = [k for k in k0 + stride * np.arange(1, record.scene.future_steps + 1) if k <= end]
+    adv_frac, other_frac = 0.0, 0.0
+    for row, agent in enumerate(record.agent_ids):
+        if row == 0:
+            continue
+        fracs = [off_road_fraction(spliced.states[agent, k], spliced.sizes[agent], area)
+                 for k in knot_steps if spliced.valid[agent, k]]
+        worst = max(fracs, default=0.0)
+        if row == adversary_row:
+            adv_frac = worst
+        else:
+            other_frac = max(other_frac, worst)
+
+    metrics = {
+        "planner": planner_spec, "adversary_row": int(adversary_row), "spliced_rows": rows.tolist(),
+        "collision": k_coll is not None,
+        "collision_time_s": None if k_coll is None else round(k_coll * dt, 6),
+        "collision_iou": float(iou),
+        "collision_any": k_any is not None,
+        "collision_any_time_s": None if k_any is None else round(k_any * dt, 6),
+        "collision_any_row": None if k_any is None else
+        (int(np.flatnonzero(row_ids == with_any)[0]) if with_any in row_ids else -1),
+        "collision_before_t0": k_before is not None and k_before < k0,
+        "adversary_off_road": adv_frac > OFF_ROAD_FRACTION, "adversary_off_road_max": adv_frac,
+        "other_off_road": other_frac > OFF_ROAD_FRACTION, "other_off_road_max": other_frac,
+        "kinematic_value_mps": None, "collision_type": None, "solution_found": None,
+        "solution_found_longitudinal": None,
+        "ego_off_road": bool(result.drive["off_road"]),
+    }
+    metrics["ego_min_accel_mps2"], metrics["ego_max_abs_accel_mps2"] = _ego_accelerations(result, end)
+    if k_coll is not None:
+        s = result.states
+        v_ego = s[ego, k_coll, 4] * s[ego, k_coll, 2:4]
+        v_adv = s[adv, k_coll, 4] * s[adv, k_coll, 2:4]
+        metrics["kinematic_value_mps"] = float(np.linalg.norm(v_ego - v_adv))
+        lo = max(0, k_coll - round(CUT_IN_LOOKBACK_S / dt))
+        both = result.valid[ego, lo:k_coll + 1] & result.valid[adv, lo:k_coll + 1]
+        metrics["collision_type"] = classify_collision(s[ego, lo:k_coll + 1][both], s[adv, lo:k_coll + 1][both],
+                                                       result.sizes[ego], result.sizes[adv])
+        longitudinal = ego_only_solution(s, result.valid, result.sizes, ego, k_coll, dt)
+        lane_m = float(np.median([lane.width_m for lane in record.window.lanes])) if record.window.lanes else 4.0
+
+        def on_road(centre, heading, length, width):
+            state = np.array([*centre, *heading])
+            return off_road_fraction(state, (length, width), area) <= OFF_ROAD_FRACTION
+
+        metrics["solution_found_longitudinal"] = bool(longitudinal)
+        metrics["solution_found"] = bool(longitudinal) or bool(ego_only_solution(
+            s, result.valid, result.sizes, ego, k_coll, dt, accels_mps2=SOLUTION_LATERAL_ACCELS_MPS2,
+            lateral_offsets_m=(lane_m, -lane_m), on_road=on_road))
+    path = result.states[ego, k0:end + 1, :2][result.valid[ego, k0:end + 1]]
+    metrics["ego_progress_m"] = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
+    gap = _min_gap(result, k0, end)
+    metrics["min_gap_m"] = gap if np.isfinite(gap) else None       # None: nobody within 40 m
+    metrics["rollout_s"] = result.wall_s
+    return metrics
+
+
+def handover_offsets(env_id: str, seed: int, episodes: int, specs: tuple[str, ...]) -> dict:
+    """Per SPEC: seconds per rollout (untouched record) and the distance (m) between the ego's
+    closed-loop position at t0 and the human's logged one (the planner drives from t = 0, so by
+    t0 it is no longer where the window's history says), over scenes 0..episodes-1."""
+    from adversary.crash.scenes import AttackScene, record_attack_scene
+
+    records = []
+    for episode in range(episodes):
+        try:
+            records.append(record_attack_scene(AttackScene(env_id, seed, episode)))
+        except InputError:
+            continue
+    out = {"env_id": env_id, "seed": seed, "scenes": len(records)}
+    for spec in specs:
+        planner = cached_planner(spec)
+        seconds, offsets = [], []
+        for record in records:
+            empty = np.zeros((0, record.scene.future_steps, 6))
+            result = rollout(record, empty, [], planner, spec)
+            seconds.append(result.wall_s)
+            here = result.states[result.ego, record.t0_step, :2]
+            offsets.append(float(np.linalg.norm(here - record.log.states[record.log.ego_id, record.t0_step, :2])))
+        out[spec] = {"seconds_per_rollout_mean": float(np.mean(seconds)),
+                     "t0_offset_m_mean": float(np.mean(offsets)), "t0_offset_m_max": float(np.max(offsets))}
+    return out
+
+
+if __name__ == "__main__":
+    import argparse
+    import json
+
+    parser = argparse.ArgumentParser(description="Rollout speed and the ego's offset from its log at t0.")
+    parser.add_argument("--env", default="highway-v0")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--episodes", type=int, default=10)
+    parser.add_argument("--planners", nargs="+", default=["replay", "idm", "riskmap:checkpoints/riskmap_highway"])
+    args = parser.parse_args()
+    print(json.dumps(handover_offsets(args.env, args.seed, args.episodes, tuple(args.planners)), indent=1))
