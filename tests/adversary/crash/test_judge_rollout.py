@@ -5,7 +5,15 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from adversary.crash.judge import braking_track, cached_planner, ego_future_2hz, judge, rollout, splice_tracks
+from adversary.crash.judge import (
+    braking_track,
+    cached_planner,
+    ego_future_2hz,
+    ego_track_2hz,
+    judge,
+    rollout,
+    splice_tracks,
+)
 from adversary.crash.scenes import AttackScene, record_attack_scene
 from rasterize.errors import InputError
 
@@ -110,3 +118,4 @@ def test_reactive_ego_avoids_the_attack_and_is_untouched_before_t0(record):
     assert abs(attacked.states[attacked.ego, -1, 1] - calm.states[calm.ego, -1, 1]) > 2.0
     assert not judge(record, tracks, [AHEAD], AHEAD, planner, "idm", result=attacked)["collision"]
     np.testing.assert_array_equal(ego_future_2hz(attacked), attacked.states[attacked.ego, 25:81:5])
+    np.testing.assert_array_equal(ego_track_2hz(attacked), attacked.states[attacked.ego, 0:81:5])
