@@ -189,13 +189,22 @@ def rollout(record: SceneRecord, tracks: np.ndarray, rows, planner, planner_spec
                    record.t0_step, planner_spec, drive, time.perf_counter() - started)
 
 
-def ego_future_2hz(result: Rollout, future_steps: int = 12) -> np.ndarray:
-    """The ego's closed-loop states [future_steps, 6] at t0 + 0.5 ... t0 + 0.5 * future_steps;
-    past the end of the rollout (the ego left the road) its last state is repeated."""
+def ego_track_2hz(result: Rollout, past_steps: int = 4, future_steps: int = 12) -> np.ndarray:
+    """The ego's closed-loop states [past_steps + 1 + future_steps, 6] at 2 Hz around t0 (the
+    window's time grid; row past_steps is t0). The planner drives from t = 0, so its past differs
+    from the human's in the window; past the end of the rollout (the ego left the road) its last
+    state is repeated."""
     stride = round(WINDOW_DT_S / result.dt_s)
-    steps = result.t0_step + stride * np.arange(1, future_steps + 1)
+    steps = result.t0_step + stride * np.arange(-past_steps, future_steps + 1)
+    if steps[0] < 0:
+        raise InputError(f"past_steps={past_steps} reaches before the start of the rollout")
     last = int(np.flatnonzero(result.valid[result.ego])[-1])
     return result.states[result.ego, np.minimum(steps, last)].copy()
+
+
+def ego_future_2hz(result: Rollout, future_steps: int = 12) -> np.ndarray:
+    """The ego's closed-loop states [future_steps, 6] at t0 + 0.5 ... t0 + 0.5 * future_steps."""
+    return ego_track_2hz(result, 0, future_steps)[1:]
 
 
 

@@ -5,7 +5,15 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from adversary.crash.judge import braking_track, cached_planner, ego_future_2hz, judge, rollout, splice_tracks
+from adversary.crash.judge import (
+    braking_track,
+    cached_planner,
+    ego_future_2hz,
+    ego_track_2hz,
+    judge,
+    rollout,
+    splice_tracks,
+)
 from adversary.crash.scenes import AttackScene, record_attack_scene
 from rasterize.errors import InputError
 
@@ -96,3 +104,18 @@ def test_off_road_adversary_is_flagged(record):
     metrics = judge(record, track[None], [AHEAD], AHEAD, cached_planner("idm"), "idm")
     assert metrics["adversary_off_road"] and metrics["adversary_off_road_max"] == pytest.approx(1.0)
     assert not metrics["other_off_road"]
+
+
+def test_reactive_ego_avoids_the_attack_and_is_untouched_before_t0(record):
+    planner = cached_planner("idm")
+    tracks = braking_track(record, AHEAD, decel_mps2=8.0)[None]
+    attacked = rollout(record, tracks, [AHEAD], planner, "idm")
+    calm = rollout(record, np.zeros((0, 12, 6)), [], planner, "idm")
+    again = rollout(record, tracks, [AHEAD], planner, "idm")
+    np.testing.assert_array_equal(attacked.states[attacked.ego], again.states[again.ego])   # deterministic
+    np.testing.assert_array_equal(attacked.states[attacked.ego, :21], calm.states[calm.ego, :21])  # causal
+    # The IDM/MOBIL human, unlike its played-back log, reacts: it changes lane around the stopping car.
+    assert abs(attacked.states[attacked.ego, -1, 1] - calm.states[calm.ego, -1, 1]) > 2.0
+    assert not judge(record, tracks, [AHEAD], AHEAD, planner, "idm", result=attacked)["collision"]
+    np.testing.assert_array_equal(ego_future_2hz(attacked), attacked.states[attacked.ego, 25:81:5])
+    np.testing.assert_array_equal(ego_track_2hz(attacked), attacked.states[attacked.ego, 0:81:5])
