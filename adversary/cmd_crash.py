@@ -100,7 +100,7 @@ def _run_attack(args: argparse.Namespace) -> int:
     summary = run_attacks(args.planner, Path(args.scenes), args.count, config, args.seed, Path(args.out),
                           traffic, selectors if needs_selector else None,
                           workers=args.workers, resume=args.resume, panels=args.panels,
-                          progress=not args.quiet)
+                          progress=not args.quiet, batch_size=args.batch_size)
     print(TABLE_HEADER)
     print(table_row(f"{args.planner} / {args.selector}", summary["summary"]))
     return 0
@@ -142,6 +142,7 @@ def add_attack_parsers(subparsers) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", required=True)
     p.add_argument("--workers", type=_positive_int, default=1)
+    p.add_argument("--batch-size", type=_positive_int, default=8, help="scenes optimised together")
     p.add_argument("--traffic-model", default=None,
                    help="traffic CVAE checkpoint (default: checkpoints/crash_traffic_<family>)")
     p.add_argument("--selector-model", default=None,

@@ -17,7 +17,7 @@ adversary, the generated tracks, the metrics, and where the time went.
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -89,13 +89,6 @@ def world_tracks(item: SceneTensors, traj: np.ndarray) -> np.ndarray:
     return world
 
 
-def scene_frame_ego(item: SceneTensors, ego_world: np.ndarray) -> torch.Tensor:
-    """World ego states [F, 6] as a scene-frame future [1, F, 4] (x, y, heading, speed)."""
-    framed = _to_frame(ego_world, item.origin, item.heading)
-    out = np.stack([framed[:, 0], framed[:, 1], np.arctan2(framed[:, 3], framed[:, 2]), framed[:, 4]], -1)
-    return torch.from_numpy(out[None].astype(np.float32))
-
-
 def selection(config: AttackConfig, models: Models, batch, enc, z_init, ego_future, rng) -> torch.Tensor:
     mam = config.selector in ("crash", "distance+mam")
     mask = candidates(batch, mam=mam)
@@ -117,67 +110,105 @@ def selection(config: AttackConfig, models: Models, batch, enc, z_init, ego_futu
     return random_weights(mask, rng)
 
 
-def attack_record(record, models: Models, planner, planner_spec: str, config: AttackConfig,
-                  seed: int, panel: Path | None = None) -> dict:
-    """Run one attack on `record` (an `adversary.crash.scenes.SceneRecord`); see the module docstring."""
-    from adversary.crash.judge import ego_future_2hz, judge, rollout
+def _ego_in_scene_frame(item: SceneTensors, track_world: np.ndarray) -> np.ndarray:
+    """World ego states [T, 6] as scene-frame (x, y, cos, sin, speed) [T, 5]."""
+    return _to_frame(track_world, item.origin, item.heading).astype(np.float32)
+
+
+def attack_records(records: list, models: Models, planner, planner_spec: str, config: AttackConfig,
+                   seeds: list[int], panels: list[Path | None] | None = None) -> list[dict]:
+    """Attack every record (`adversary.crash.scenes.SceneRecord`) in one batch; one JSON-ready
+    dict per record (module docstring). Scenes are independent: batching only saves time."""
+    from adversary.crash.judge import ego_track_2hz, judge, rollout
 
     started = time.perf_counter()
-    timing = {"rollout_s": 0.0, "rollouts": 0}
-    item = scene_tensors(record.window, models.features)
-    batch = collate([item])
+    b = len(records)
+    timing = [{"rollout_s": 0.0, "rollouts": 0} for _ in range(b)]
+    items = [scene_tensors(r.window, models.features) for r in records]
     model = models.traffic
     closed_loop = planner_spec != "replay"
-    rows = item.rows
-    n = item.num_agents
 
-    def drive(traj: np.ndarray | None):
+    def drive(i: int, traj: np.ndarray | None):
         t = time.perf_counter()
-        tracks = (np.zeros((0, 12, 6)) if traj is None else world_tracks(item, traj[:n])[1:])
-        result = rollout(record, tracks, rows[1:] if traj is not None else [], planner, planner_spec)
-        timing["rollout_s"] += time.perf_counter() - t
-        timing["rollouts"] += 1
+        n = items[i].num_agents
+        tracks = np.zeros((0, 12, 6)) if traj is None else world_tracks(items[i], traj[:n])[1:]
+        result = rollout(records[i], tracks, items[i].rows[1:] if traj is not None else [], planner,
+                         planner_spec)
+        timing[i]["rollout_s"] += time.perf_counter() - t
+        timing[i]["rollouts"] += 1
         return tracks, result
 
+    if closed_loop:
+        # The planner drives from t = 0, so by t0 its ego is not where the human was: the model's
+        # ego node takes the planner's own history, and its future is what the planner does
+        # against the logged traffic.
+        for i in range(b):
+            _, first = drive(i, None)
+            track = _ego_in_scene_frame(items[i], ego_track_2hz(first))
+            items[i] = replace(items[i], past=np.concatenate([track[None, :5], items[i].past[1:]]),
+                               future=np.concatenate([track[None, 5:], items[i].future[1:]]),
+                               past_valid=np.concatenate([np.ones((1, 5), bool), items[i].past_valid[1:]]),
+                               future_valid=np.concatenate([np.ones((1, 12), bool), items[i].future_valid[1:]]))
+    batch = collate(items)
+    ego_future = logged_ego_future(batch)
     with torch.no_grad():
         enc = model.encode(batch)
         z_init, _ = model.posterior_of(batch, enc)
-    if closed_loop:
-        _, first = drive(None)
-        ego_future = scene_frame_ego(item, ego_future_2hz(first))
-    else:
-        ego_future = logged_ego_future(batch)
-    rng = np.random.default_rng(seed)
-    p = selection(config, models, batch, enc, z_init, ego_future, rng)
-    base = {"scene": asdict(record.scene), "planner": planner_spec, "selector": config.selector,
-            "config": asdict(config), "seed": seed, "agents": n,
-            "candidates": int((p[0] > 0).sum()) if p.sum() > 0 else 0,
-            "p": [round(float(v), 5) for v in p[0, :n]]}
-    if p.sum() <= 0:
-        return {**base, "status": "no_candidate", "collision": False,
-                "seconds": time.perf_counter() - started}
+    p = torch.zeros(b, batch.past.shape[1])
+    for i in range(b):
+        # Selection scene by scene: the random draw depends only on the scene's own seed.
+        single = collate([items[i]])
+        with torch.no_grad():
+            enc_i = model.encode(single)
+            z_i, _ = model.posterior_of(single, enc_i)
+        p[i, :items[i].num_agents] = selection(config, models, single, enc_i, z_i, logged_ego_future(single),
+                                               np.random.default_rng(seeds[i]))[0]
 
-    def replan(traj: torch.Tensor) -> torch.Tensor:
-        _, result = drive(traj[0].numpy())
-        return scene_frame_ego(item, ego_future_2hz(result))
+    def replan(traj: torch.Tensor, scenes: list[int]) -> torch.Tensor:
+        out = []
+        for i in scenes:
+            _, result = drive(i, traj[i].numpy())
+            out.append(torch.from_numpy(_future_of(_ego_in_scene_frame(items[i], ego_track_2hz(result)[5:]))))
+        return torch.stack(out)
 
     gen = generate(model, batch, p, ego_future, config.generation(closed_loop),
                    replan=replan if closed_loop else None, z_init=z_init)
-    adversary = int(gen.adversary[0])
-    traj = gen.traj[0].numpy()
-    tracks, final = drive(traj)
-    metrics = judge(record, tracks, rows[1:], int(rows[adversary]), planner, planner_spec, result=final)
-    if panel is not None:
-        from adversary.crash.panel import save_attack_panel
+    shared_s = (time.perf_counter() - started - sum(t["rollout_s"] for t in timing)) / b
+    out = []
+    for i, (record, item) in enumerate(zip(records, items)):
+        n = item.num_agents
+        base = {"scene": asdict(record.scene), "planner": planner_spec, "selector": config.selector,
+                "config": asdict(config), "seed": seeds[i], "agents": n,
+                "candidates": int((p[i] > 0).sum()), "p": [round(float(v), 5) for v in p[i, :n]]}
+        adversary = int(gen.adversary[i])
+        if adversary < 0:
+            out.append({**base, "status": "no_candidate", "collision": False,
+                        "seconds": shared_s + timing[i]["rollout_s"], "timing": timing[i]})
+            continue
+        tracks, final = drive(i, gen.traj[i].numpy())
+        adv_row = int(item.rows[adversary])
+        metrics = judge(record, tracks, item.rows[1:], adv_row, planner, planner_spec, result=final)
+        panel = panels[i] if panels else None
+        if panel is not None:
+            from adversary.crash.panel import save_attack_panel
 
-        save_attack_panel(record, tracks, rows[1:], int(rows[adversary]), final, metrics, panel,
-                          f"{record.scene.env_id} seed {record.scene.scene_seed} episode "
-                          f"{record.scene.episode} | {planner_spec} | {config.selector}")
-    return {**base, "status": "ok", "adversary_row": int(rows[adversary]),
-            "adversary_log_id": int(record.agent_ids[rows[adversary]]),
-            "collision": bool(metrics["collision"]), "metrics": metrics,
-            "generation": {"iterations": gen.iterations, "replans": gen.replans,
-                           "seconds": round(gen.seconds, 3), "losses": gen.losses},
-            "tracks": np.round(tracks, 3).tolist(),
-            "timing": {**timing, "rollout_s": round(timing["rollout_s"], 3)},
-            "seconds": time.perf_counter() - started}
+            save_attack_panel(record, tracks, item.rows[1:], adv_row, final, metrics, panel,
+                              f"{record.scene.env_id} seed {record.scene.scene_seed} episode "
+                              f"{record.scene.episode} | {planner_spec} | {config.selector}")
+        out.append({**base, "status": "ok", "adversary_row": adv_row,
+                    "adversary_log_id": int(record.agent_ids[adv_row]),
+                    "collision": bool(metrics["collision"]), "metrics": metrics,
+                    "generation": {"iterations": gen.iterations[i], "replans": gen.replans[i],
+                                   "batch_seconds": round(gen.seconds, 3), "batch_size": b,
+                                   "losses": gen.losses if i == 0 else None},
+                    "tracks": np.round(tracks, 3).tolist(),
+                    "timing": {**timing[i], "rollout_s": round(timing[i]["rollout_s"], 3)},
+                    # this scene's rollouts plus an equal share of the batch's optimisation
+                    "seconds": shared_s + timing[i]["rollout_s"]})
+    return out
+
+
+def _future_of(framed: np.ndarray) -> np.ndarray:
+    """Scene-frame (x, y, cos, sin, speed) [F, 5] as (x, y, heading, speed) [F, 4]."""
+    return np.stack([framed[:, 0], framed[:, 1], np.arctan2(framed[:, 3], framed[:, 2]), framed[:, 4]],
+                    -1).astype(np.float32)

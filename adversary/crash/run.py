@@ -4,8 +4,9 @@ Scenes: DIR/scene_NNNN.npz (+ .json) written by `record_scenes`, sweeping episod
 `--seed` and skipping those that cannot be attacked (the human crashed before t0 + horizon, or
 no vehicle near the ego); DIR/index.json lists them in order.
 
-Attacks: OUT/attacks/<scene>.json, one per scene, written atomically as soon as it finishes;
-`--resume` skips the scenes already there, so a killed run loses nothing. OUT/summary.json and
+Attacks: OUT/attacks/<scene>.json, one per scene, written atomically as soon as its batch
+finishes (`--batch-size` scenes are optimised together: one Adam step updates all of them, which
+costs little more than one scene on a CPU); `--resume` skips the scenes already there. OUT/summary.json and
 OUT/table.md aggregate them (denominators included). With `--workers K` scenes run in a process
 pool; every scene's random draws depend only on (seed, scene), so results do not depend on K.
 """
@@ -13,7 +14,6 @@ pool; every scene's random draws depend only on (seed, scene), so results do not
 from __future__ import annotations
 
 import json
-import os
 import time
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict
@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from adversary.crash.attack import AttackConfig, attack_record, load_models
+from adversary.crash.attack import AttackConfig, attack_records, load_models
 from rasterize.errors import InputError
 from riskmap.atomic import atomic_write, write_json
 from riskmap.provenance import provenance
@@ -76,9 +76,9 @@ def scene_paths(scenes_dir: Path, count: int) -> list[Path]:
 _MODELS: dict = {}
 
 
-def _attack_one(path: str, planner_spec: str, config: AttackConfig, seed: int, traffic: str,
-                selectors: str | None, panel: str | None) -> dict:
-    """Worker entry: one scene, never raises (an error becomes the record)."""
+def _attack_batch(paths: list[str], planner_spec: str, config: AttackConfig, seed: int, traffic: str,
+                  selectors: str | None, panels: list[str | None]) -> list[dict]:
+    """Worker entry: a batch of scenes, never raises (an error becomes every scene's record)."""
     import torch
 
     from adversary.crash.judge import cached_planner
@@ -86,22 +86,23 @@ def _attack_one(path: str, planner_spec: str, config: AttackConfig, seed: int, t
 
     torch.set_num_threads(1)
     started = time.perf_counter()
-    name = Path(path).stem
+    names = [Path(p).stem for p in paths]
     try:
         key = (traffic, selectors)
         if key not in _MODELS:
             _MODELS[key] = load_models(Path(traffic), Path(selectors) if selectors else None)
-        record = load_record(Path(path))
-        scene_seed = int(np.random.SeedSequence([seed, record.scene.scene_seed, record.scene.episode])
-                         .generate_state(1)[0])
+        records = [load_record(Path(p)) for p in paths]
+        seeds = [int(np.random.SeedSequence([seed, r.scene.scene_seed, r.scene.episode]).generate_state(1)[0])
+                 for r in records]
         planner = cached_planner(planner_spec, seed)
-        result = attack_record(record, _MODELS[key], planner, planner_spec, config, scene_seed,
-                               Path(panel) if panel else None)
-    except Exception as error:  # noqa: BLE001  (a failing scene is recorded; the run goes on)
-        result = {"status": "error", "collision": False,
-                  "error": (f"{type(error).__name__}: {error}".splitlines() or [""])[0][:500],
-                  "seconds": time.perf_counter() - started}
-    return {"name": name, **result}
+        results = attack_records(records, _MODELS[key], planner, planner_spec, config, seeds,
+                                 [Path(p) if p else None for p in panels])
+    except Exception as error:  # noqa: BLE001  (a failing batch is recorded; the run goes on)
+        message = (f"{type(error).__name__}: {error}".splitlines() or [""])[0][:500]
+        seconds = (time.perf_counter() - started) / len(paths)
+        results = [{"status": "error", "collision": False, "error": message, "seconds": seconds}
+                   for _ in paths]
+    return [{"name": name, **result} for name, result in zip(names, results)]
 
 
 def summarise(records: list[dict]) -> dict:
@@ -133,6 +134,7 @@ def summarise(records: list[dict]) -> dict:
         "seconds_per_scene_median": float(np.median(seconds)) if seconds else None,
         "seconds_per_scene_mean": float(np.mean(seconds)) if seconds else None,
         "iterations_mean": float(np.mean([r["generation"]["iterations"] for r in ok])) if ok else None,
+        "rollouts_mean": float(np.mean([r["timing"]["rollouts"] for r in ok])) if ok else None,
         "replans_mean": float(np.mean([r["generation"]["replans"] for r in ok])) if ok else None,
     }
 
@@ -156,7 +158,7 @@ TABLE_HEADER = ("| run | collision | adv off-road % | other off-road % | kinemat
 
 def run_attacks(planner_spec: str, scenes_dir: Path, count: int, config: AttackConfig, seed: int,
                 out: Path, traffic: Path, selectors: Path | None, workers: int = 1, resume: bool = False,
-                panels: int = 0, progress: bool = True) -> dict:
+                panels: int = 0, progress: bool = True, batch_size: int = 8) -> dict:
     from riskmap.registry import make_planner
 
     out = Path(out)
@@ -181,26 +183,29 @@ def run_attacks(planner_spec: str, scenes_dir: Path, count: int, config: AttackC
     def panel_for(i: int) -> str | None:
         return str(panels_dir / f"{paths[i].stem}.png") if i < panels else None
 
-    args = [(str(p), planner_spec, config, seed, str(traffic), str(selectors) if selectors else None,
-             panel_for(paths.index(p))) for p in todo]
+    batches = [todo[i:i + batch_size] for i in range(0, len(todo), batch_size)]
+    args = [([str(p) for p in chunk], planner_spec, config, seed, str(traffic),
+             str(selectors) if selectors else None, [panel_for(paths.index(p)) for p in chunk])
+            for chunk in batches]
     done = 0
 
-    def save(result: dict) -> None:
+    def save(results: list[dict]) -> None:
         nonlocal done
-        write_json(attacks_dir / f"{result['name']}.json", result)
-        done += 1
-        if progress:
-            print(f"[{done}/{len(todo)}] {result['name']}: {result['status']}"
-                  f"{' COLLISION' if result['collision'] else ''} ({result['seconds']:.1f} s)", flush=True)
+        for result in results:
+            write_json(attacks_dir / f"{result['name']}.json", result)
+            done += 1
+            if progress:
+                print(f"[{done}/{len(todo)}] {result['name']}: {result['status']}"
+                      f"{' COLLISION' if result['collision'] else ''} ({result['seconds']:.1f} s)", flush=True)
 
     if panels:
         panels_dir.mkdir(parents=True, exist_ok=True)
     if workers <= 1:
         for a in args:
-            save(_attack_one(*a))
+            save(_attack_batch(*a))
     else:
-        with ProcessPoolExecutor(max_workers=workers, initializer=os.nice, initargs=(0,)) as pool:
-            futures = [pool.submit(_attack_one, *a) for a in args]
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            futures = [pool.submit(_attack_batch, *a) for a in args]
             for future in as_completed(futures):
                 save(future.result())
     records = [json.loads((attacks_dir / f"{p.stem}.json").read_text()) for p in paths]

@@ -159,7 +159,7 @@ def test_generation_pulls_the_adversary_onto_the_ego(model):
     gen = generate(model, batch, p, ego, GenerationConfig(iterations=60, lr=0.1, stop_on_collision=False))
     with torch.no_grad():
         after, traj, _ = attack_loss(model, batch, enc, gen.z, z0, p, gen.adversary, ego, GenerationConfig())
-    assert gen.adversary.tolist() == [2] and gen.iterations == 60
+    assert gen.adversary.tolist() == [2] and gen.iterations == [60]
     assert float(after) < float(before)
     gap_before = (traj0[0, 2, :, :2] - ego[0, :, :2]).norm(dim=-1).mean()
     gap_after = (traj[0, 2, :, :2] - ego[0, :, :2]).norm(dim=-1).mean()
