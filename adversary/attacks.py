@@ -65,7 +65,8 @@ def register_attack(name: str, params_type: type, factory: Callable[[Any, int], 
 
 
 def _register_builtin() -> None:
-    import adversary.aggressive  # noqa: F401  (registers aggressive_neighbour)
+    # Importing a module registers its attacks.
+    from adversary import aggressive, search_attack  # noqa: F401  (aggressive_neighbour; *_search)
 
 
 def attack_entry(name: str) -> AttackEntry:
