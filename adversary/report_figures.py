@@ -85,23 +85,37 @@ def collision_types_figure(rows: list[dict], path: Path) -> str:
 
 
 def search_figure(history: list[dict], path: Path) -> str:
-    """Collisions per generation (left) and the Pareto front's first two objectives (right)."""
+    """Collisions per generation (left) and the Pareto front's first two objectives (right), one
+    colour per (planner, attack): the searches of its jobs summed per generation, fronts pooled."""
+    from matplotlib.ticker import MaxNLocator
+
     plt = _plt()
     fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), dpi=100)
+    groups: dict[tuple[str, str], list[dict]] = {}
     for h in history:
-        label = f"{short_spec(h['planner'])} / {h['attack']}"
-        if h["generations"]:
-            axes[0].plot([g.get("collisions", 0) for g in h["generations"]], "-o", ms=3, label=label)
-        front = np.asarray(h["pareto_front"], dtype=float)
-        if front.ndim == 2 and front.shape[1] >= 2:
-            axes[1].scatter(front[:, 0], front[:, 1], s=14, label=label)
-            names = h["objective_names"] or ["objective 1", "objective 2"]
+        groups.setdefault((h["planner"], h["attack"]), []).append(h)
+    for (planner, attack), runs in groups.items():
+        label = f"{short_spec(planner)} / {attack} ({len(runs)} search{'es' if len(runs) > 1 else ''})"
+        depth = max(len(h["generations"]) for h in runs)
+        if depth:
+            collisions = np.zeros(depth)
+            for h in runs:
+                collisions[:len(h["generations"])] += [g.get("collisions", 0) for g in h["generations"]]
+            axes[0].plot(np.arange(1, depth + 1), collisions, "-o", ms=3, label=label)
+        fronts = [np.asarray(h["pareto_front"], dtype=float) for h in runs]
+        fronts = [f for f in fronts if f.ndim == 2 and f.shape[1] >= 2]
+        if fronts:
+            front = np.concatenate(fronts)
+            axes[1].scatter(front[:, 0], front[:, 1], s=14, alpha=0.8, label=label)
+            names = runs[0]["objective_names"] or ["objective 1", "objective 2"]
             axes[1].set_xlabel(names[0])
             axes[1].set_ylabel(names[1] if len(names) > 1 else "objective 2")
+    axes[0].xaxis.set_major_locator(MaxNLocator(integer=True))
+    axes[0].yaxis.set_major_locator(MaxNLocator(integer=True))
     axes[0].set_xlabel("generation")
-    axes[0].set_ylabel("collisions")
+    axes[0].set_ylabel("collisions (summed over searches)")
     axes[0].set_title("collisions per generation", fontsize=10)
-    axes[1].set_title("Pareto front", fontsize=10)
+    axes[1].set_title("Pareto fronts (first two objectives)", fontsize=10)
     for ax in axes:
         ax.grid(alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
