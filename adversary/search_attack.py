@@ -45,10 +45,16 @@ class SearchAttackParams:
         require(self.episode_s > 0, f"search attack episode_s must be positive, got {self.episode_s}")
 
 
+# The search's seed is also the planner's seed, and the risk-map planner seeds scikit-learn's
+# KMeans with seed · 1 000 003 + plan calls, which must stay below 2³²: seeds stay below 4096.
+SEARCH_SEEDS = 4096
+
+
 def search_seed(planner_seed: int, scene_seed: int, episode: int) -> int:
-    """The search's seed (pymoo, planner sampling, perception noise) for one job."""
+    """The search's seed (pymoo, planner sampling, perception noise) for one job, in
+    [0, SEARCH_SEEDS); two jobs share one with probability 1/4096."""
     return int(np.random.SeedSequence([planner_seed, scene_seed, episode]).generate_state(1)[0]
-               % (2 ** 31))
+               % SEARCH_SEEDS)
 
 
 def search_config(attack_name: str, params: SearchAttackParams, planner: str, seed: int):
