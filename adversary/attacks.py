@@ -18,7 +18,8 @@ campaign config is read) and a category, which decides where the report shows it
     baseline     no perturbation (the `natural` episode)
     rule         hand-made adversarial behaviour (e.g. `aggressive_neighbour`)
     selection    learned or distance-based adversary selection + generation (CRASH, STRIVE)
-    search       black-box scenario search (NSGA-II, random)
+    search       black-box scenario search (NSGA-II, random); these do not use the hooks: the job
+                 runs a search and replays its most critical scenario (adversary.search_attack)
 
 Adding an attack is one `register_attack(...)` call in the module that implements it, plus its
 import in `_register_builtin`.

@@ -4,6 +4,10 @@
 picklable arguments, so a process pool and Ray run exactly the same code. Results depend only on
 the job (fresh episode from its seed, planner state reset per episode), never on which worker or
 in which order jobs run, so a resumed or distributed campaign gives the same numbers.
+
+Attacks of category "search" do not perturb the job's scene through episode hooks: their job runs
+a seeded scenario search against the planner and replays the most critical scenario found
+(`_search_and_replay`, adversary.search_attack); every other category drives the scene (`_drive`).
 """
 
 from __future__ import annotations

@@ -9,8 +9,8 @@ scenario it found. In a campaign config:
 
 A template places the ego and one target on an empty highway-v0 road (adversary.templates), so a
 search attack does not use its job's recorded scene: the job's (campaign seed, scene seed,
-episode) only seed the search (`search_seed`), and every episode of a family is one more
-independent search. The job's record is the replayed episode of the most critical vector
+episode) only seed the search (`search_seed`): every episode of a family is one more independent
+search, and every planner starts from the same initial population. The job's record is the replayed episode of the most critical vector
 (adversary.search.most_critical), so for this attack "collision rate" is the share of searches
 that found a failure; `attack_extra` holds the per-generation collisions, the Pareto front and
 the best parameters (SearchOutcome.extra).
