@@ -33,7 +33,7 @@ import numpy as np
 from pymoo.core.problem import ElementwiseProblem
 
 from adversary.evaluate import EvaluationConfig, constraint_value, evaluate
-from adversary.objectives import OBJECTIVE_NAMES, collided_from_objectives, unpenalised
+from adversary.objectives import OBJECTIVE_NAMES, collided_from_objectives, scene_alteration, unpenalised
 from adversary.templates import Template, get_template
 from rasterize.errors import InputError
 from riskmap.atomic import write_json
@@ -208,8 +208,6 @@ def search_in_process(config: SearchConfig) -> SearchOutcome:
     """Run the search in this process (no files, no progress bar); see `SearchOutcome`."""
     from pymoo.util.nds.non_dominated_sorting import NonDominatedSorting
 
-    from adversary.objectives import scene_alteration
-
     template = get_template(config.template)
     problem = ScenarioProblem(template, config.evaluation, store=None)
     xs, fs, gs, counts = [], [], [], []
@@ -218,7 +216,9 @@ def search_in_process(config: SearchConfig) -> SearchOutcome:
         feasible = g <= 0
         counts.append({"evaluations": len(x),
                        "collisions": int(collided_from_objectives(f[feasible]).sum())})
-        xs.append(x), fs.append(f), gs.append(g)
+        xs.append(x)
+        fs.append(f)
+        gs.append(g)
     X, F, G = np.concatenate(xs), np.concatenate(fs), np.concatenate(gs)
     alteration = np.array([scene_alteration(x, template.neutral, template.lower, template.upper)
                            for x in X])
