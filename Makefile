@@ -36,10 +36,9 @@ demo: $(STAMP)
 	$(BIN)/riskmap drive --planner idm --env highway-v0 --episodes 2 --seed 0 --out $(DEMO_OUT)/drive/highway_idm --resume
 	$(BIN)/riskmap drive --checkpoint checkpoints/riskmap_intersection --env intersection-v0 --episodes 2 --seed 0 --out $(DEMO_OUT)/drive/intersection --frames --resume
 	$(BIN)/riskmap drive --planner idm --env intersection-v0 --episodes 2 --seed 0 --out $(DEMO_OUT)/drive/intersection_idm --resume
-	$(BIN)/adversary search --planner idm --template cut_in --algorithm nsga2 --pop 8 --gen 3 --seed 0 --workers 2 --out $(DEMO_OUT)/search/idm_cut_in --resume --quiet
 	$(BIN)/adversary stress-test --config experiments/campaigns/demo.yaml --out $(DEMO_OUT)/stress --workers 2 --resume
 	$(BIN)/adversary report $(DEMO_OUT)/stress --out $(DEMO_OUT)
-	@echo "demo: report in $(DEMO_OUT)/report.html, scenario search in $(DEMO_OUT)/search, figures in $(DEMO_OUT)/figures, closed-loop runs (and frames) in $(DEMO_OUT)/drive"
+	@echo "demo: report in $(DEMO_OUT)/report.html (with the scenario search), figures in $(DEMO_OUT)/figures, closed-loop runs (and frames) in $(DEMO_OUT)/drive"
 
 bench: $(STAMP)
 	$(BIN)/python experiments/bench_collect.py

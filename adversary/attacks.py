@@ -18,7 +18,8 @@ campaign config is read) and a category, which decides where the report shows it
     baseline     no perturbation (the `natural` episode)
     rule         hand-made adversarial behaviour (e.g. `aggressive_neighbour`)
     selection    learned or distance-based adversary selection + generation (CRASH, STRIVE)
-    search       black-box scenario search (NSGA-II, random)
+    search       black-box scenario search (NSGA-II, random); these do not use the hooks: the job
+                 runs a search and replays its most critical scenario (adversary.search_attack)
 
 Adding an attack is one `register_attack(...)` call in the module that implements it, plus its
 import in `_register_builtin`.
@@ -65,7 +66,8 @@ def register_attack(name: str, params_type: type, factory: Callable[[Any, int], 
 
 
 def _register_builtin() -> None:
-    import adversary.aggressive  # noqa: F401  (registers aggressive_neighbour)
+    # Importing a module registers its attacks.
+    from adversary import aggressive, search_attack  # noqa: F401  (aggressive_neighbour; *_search)
 
 
 def attack_entry(name: str) -> AttackEntry:

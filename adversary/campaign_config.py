@@ -9,11 +9,14 @@
     attacks:
       - {name: natural}
       - {name: aggressive_neighbour, label: aggr-nearest, params: {selection: nearest}}
+      - {name: nsga2_search, envs: [highway-v0], params: {template: cut_in, pop: 6, generations: 3}}
     budget: {episode_s: 10, control_hz: 10, replan_hz: 2}
     safety: {close_gap_m: 2.0, ttc_s: 1.5, radius_m: 40, off_road_margin_m: 1.0}
     report: {gallery: 3}
 
 Every job is (planner, scenario family episode, attack); `jobs()` lists them in a fixed order.
+An attack with `envs` runs only on the families of those env ids (search attacks build their own
+highway-v0 road, so they must be limited to highway-v0 families; adversary.search_attack).
 """
 
 from __future__ import annotations
@@ -49,6 +52,10 @@ class AttackConfig:
     name: str                         # registered attack (adversary.attacks)
     label: str | None = None          # unique name in this campaign; default: name
     params: dict | None = None        # the attack's parameters (validated by its params type)
+    envs: tuple[str, ...] = ()        # run only on scenario families of these env ids; empty: all
+
+    def applies_to(self, env: str) -> bool:
+        return not self.envs or env in self.envs
 
 
 @dataclass(frozen=True)
@@ -82,7 +89,9 @@ class CampaignConfig:
         for family in self.scenarios:
             for planner in family.planners or self.planners:
                 for episode in range(family.episodes):
-                    for label, (name, params) in attacks.items():
+                    for attack, (label, (name, params)) in zip(self.attacks, attacks.items()):
+                        if not attack.applies_to(family.env):
+                            continue
                         jobs.append(Job(planner, family.env, family.seed, episode, label, name,
                                         params, self.seed, self.budget, self.safety))
         return jobs
@@ -110,7 +119,25 @@ def _validate(config: CampaignConfig) -> CampaignConfig:
             "safety: close_gap_m, ttc_s, off_road_margin_m must be >= 0 and radius_m > 0")
     require(config.report.gallery >= 0, "report.gallery must be >= 0")
     config.attack_params()            # validates every attack's params
+    _validate_attack_envs(config)
     return config
+
+
+def _validate_attack_envs(config: CampaignConfig) -> None:
+    from adversary.attacks import attack_entry
+    from adversary.search_attack import SEARCH_ENV_ID
+
+    envs = {family.env for family in config.scenarios}
+    for i, attack in enumerate(config.attacks):
+        unknown = sorted(set(attack.envs) - envs)
+        require(not unknown, f"attacks[{i}].envs: {unknown[0] if unknown else ''!r} is not the env of "
+                             "any scenario family")
+        used = sorted(e for e in envs if attack.applies_to(e))
+        require(bool(used), f"attacks[{i}] ({attack.name}) runs on no scenario family")
+        if attack_entry(attack.name).category == "search":
+            other = [e for e in used if e != SEARCH_ENV_ID]
+            require(not other, f"attacks[{i}] ({attack.name}) searches a {SEARCH_ENV_ID} template and "
+                               f"cannot run on {other[0] if other else ''}; add envs: [{SEARCH_ENV_ID}]")
 
 
 def campaign_from_dict(data, where: str = "campaign config") -> CampaignConfig:

@@ -51,6 +51,8 @@ def _planner_and_env(config: EvaluationConfig):
 
     key = (config.planner, config.seed, config.control_hz)
     if key not in _PROCESS_CACHE:
+        # One entry: a campaign worker runs searches with many seeds one after another.
+        _PROCESS_CACHE.clear()
         env = make_env(ENV_ID, config.control_hz)
         env.unwrapped.config["vehicles_count"] = 0     # templates place their own vehicles
         _PROCESS_CACHE[key] = (make_planner(config.planner, seed=config.seed), env)
@@ -83,11 +85,16 @@ class Trajectory:
 
 
 def run_scenario(template: Template, values: np.ndarray, config: EvaluationConfig,
-                 frames_dir: Path | None = None, on_step=None) -> tuple[dict, Trajectory]:
-    """Drive one scenario; returns the drive record and the trajectories of ego and target."""
+                 frames_dir: Path | None = None, on_step=None, on_reset=None,
+                 wrap_planner=None) -> tuple[dict, Trajectory]:
+    """Drive one scenario; returns the drive record and the trajectories of ego and target.
+    on_reset, on_step: extra `DriveHooks` callbacks (observers); wrap_planner(planner) -> the
+    planner that drives (e.g. one that keeps its last plan)."""
     from riskmap.drive import DriveConfig, DriveHooks, drive_episode
 
     planner, env = _planner_and_env(config)
+    if wrap_planner is not None:
+        planner = wrap_planner(planner)
     scenario = Scenario(template, template.as_dict(values), config.seed, 1.0 / config.control_hz)
     trajectory = Trajectory([], [])
 
@@ -109,7 +116,7 @@ def run_scenario(template: Template, values: np.ndarray, config: EvaluationConfi
     start_ego = start_target = None
     drive_config = DriveConfig(ENV_ID, episodes=1, seed=config.seed, control_hz=config.control_hz,
                                episode_s=config.episode_s)
-    hooks = DriveHooks(setup=setup, perceive=scenario.perceive, on_step=log)
+    hooks = DriveHooks(setup=setup, on_reset=on_reset, perceive=scenario.perceive, on_step=log)
     record = drive_episode(env, planner, drive_config, 0, frames_dir, hooks)
     return record, trajectory
 

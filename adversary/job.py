@@ -4,6 +4,10 @@
 picklable arguments, so a process pool and Ray run exactly the same code. Results depend only on
 the job (fresh episode from its seed, planner state reset per episode), never on which worker or
 in which order jobs run, so a resumed or distributed campaign gives the same numbers.
+
+Attacks of category "search" do not perturb the job's scene through episode hooks: their job runs
+a seeded scenario search against the planner and replays the most critical scenario found
+(`_search_and_replay`, adversary.search_attack); every other category drives the scene (`_drive`).
 """
 
 from __future__ import annotations
@@ -131,7 +135,7 @@ def _artifact(monitor: EpisodeMonitor, recording: RecordingPlanner | None, env_i
 
 
 def _drive(job: Job) -> tuple[dict, bytes]:
-    from adversary.solution import ego_only_solution
+    """Drive the job's scene with its attack's hooks (categories baseline, rule, selection)."""
     from riskmap.drive import DriveConfig, DriveHooks, drive_episode
     from riskmap.registry import HumanDriver
 
@@ -147,12 +151,46 @@ def _drive(job: Job) -> tuple[dict, bytes]:
     monitor = EpisodeMonitor(attack, job.safety, job.budget.control_hz)
     episode = drive_episode(env, recording or planner, config,
                             job.episode, hooks=DriveHooks(on_reset=monitor.start, on_step=monitor.step))
+    extra = attack.extra() if hasattr(attack, "extra") else {}
+    return _record(episode, monitor, extra), _artifact(monitor, recording, job.env_id)
+
+
+def _search_and_replay(job: Job) -> tuple[dict, bytes]:
+    """Search scenarios against the job's planner, then replay the most critical one (category
+    search; adversary.search_attack)."""
+    from adversary.evaluate import run_scenario
+    from adversary.search import search_in_process
+    from adversary.search_attack import SEARCH_ENV_ID, ReplayedScenario, search_config, search_seed
+    from adversary.templates import get_template
+    from riskmap.registry import HumanDriver
+
+    config = search_config(job.attack_name, job.attack_params, job.planner,
+                           search_seed(job.planner_seed, job.scene_seed, job.episode))
+    outcome = search_in_process(config)
+    template = get_template(config.template)
+    monitor = EpisodeMonitor(ReplayedScenario(), job.safety, config.evaluation.control_hz)
+    recordings = []
+
+    def wrap(planner):
+        recordings.append(None if isinstance(planner, HumanDriver) else RecordingPlanner(planner))
+        return recordings[0] or planner
+
+    episode, _ = run_scenario(template, np.asarray(outcome.best_x), config.evaluation,
+                              on_reset=monitor.start, on_step=monitor.step, wrap_planner=wrap)
+    record = _record(episode, monitor, outcome.extra(template))
+    return record, _artifact(monitor, recordings[0], SEARCH_ENV_ID)
+
+
+def _record(episode: dict, monitor: EpisodeMonitor, extra: dict) -> dict:
+    """The job's measurements from one driven episode and its monitor."""
+    from adversary.solution import ego_only_solution
+
     solution = None
     if episode["collided"] and monitor.collision_step is not None:
         states, valid, sizes, _ = monitor.run.recorder.arrays()
         solution = ego_only_solution(states, valid, sizes, monitor.run.recorder.ego_id,
                                      monitor.collision_step, monitor.run.dt)
-    record = {
+    return {
         "collided": bool(episode["collided"]),
         "ego_off_road": bool(episode["off_road"]),
         **monitor.summary(),
@@ -164,10 +202,9 @@ def _drive(job: Job) -> tuple[dict, bytes]:
         "env_seed": episode["env_seed"],
         "plan_calls": episode["plan_calls"],
         # Optional, attack-specific numbers (e.g. a search's generations and Pareto front).
-        "attack_extra": attack.extra() if hasattr(attack, "extra") else {},
+        "attack_extra": extra,
         "timing": {"plan_ms_median": episode["plan_ms_median"]},
     }
-    return record, _artifact(monitor, recording, job.env_id)
 
 
 def error_result(job: Job, error: BaseException, trace: str = "") -> dict:
@@ -185,7 +222,8 @@ def run_job(job: Job) -> dict:
         import torch
 
         torch.set_num_threads(1)
-        record, artifact = _drive(job)
+        search = attack_entry(job.attack_name).category == "search"
+        record, artifact = (_search_and_replay if search else _drive)(job)
         result = {"record": {**job.describe(), "status": "ok", "error": None, **record},
                   "artifact": artifact}
     except Exception as error:  # noqa: BLE001  (a failing job is recorded and the campaign goes on)

@@ -95,3 +95,20 @@ def penalised_objectives(journey_m: float, total_m: float, alteration: float, co
                   total_m / (scales.steps_max * scales.distance_max_m),
                   alteration / scales.n_params])
     return np.clip(f, 0.0, 1.0) - COLLISION_PENALTY * float(collided)
+
+
+# Names of the columns of F (scaled as in `penalised_objectives`, all minimised).
+OBJECTIVE_NAMES = ("f1 = 1 − journey / longest journey", "f2 = Σ distance to target (scaled)",
+                   "f3 = scene alteration (scaled)")
+
+
+def collided_from_objectives(F: np.ndarray) -> np.ndarray:
+    """The collision flag of penalised objective rows F [..., 3] -> [...] bool: scaled objectives
+    lie in [0, 1], so only a collision's penalty takes them below −COLLISION_PENALTY / 2."""
+    return np.asarray(F)[..., 0] < -0.5 * COLLISION_PENALTY
+
+
+def unpenalised(F: np.ndarray) -> np.ndarray:
+    """The scaled objectives of penalised rows F [..., 3] (the collision penalty taken back off)."""
+    F = np.asarray(F, dtype=np.float64)
+    return F + COLLISION_PENALTY * collided_from_objectives(F)[..., None]

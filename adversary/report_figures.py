@@ -24,8 +24,9 @@ def short_spec(spec: str) -> str:
     return f"{kind}:{Path(arg).name}" if sep and "/" in arg else spec
 
 
-def _save(fig, path: Path) -> str:
-    fig.tight_layout()
+def _save(fig, path: Path, rect=(0, 0, 1, 1)) -> str:
+    """rect: the part of the figure (left, bottom, right, top in 0..1) the axes are laid out in."""
+    fig.tight_layout(rect=rect)
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path)
     _plt().close(fig)
@@ -85,25 +86,49 @@ def collision_types_figure(rows: list[dict], path: Path) -> str:
 
 
 def search_figure(history: list[dict], path: Path) -> str:
-    """Collisions per generation (left) and the Pareto front's first two objectives (right)."""
+    """Collisions per generation (left) and the Pareto front's first two objectives (right), one
+    colour per (planner, attack): the searches of its jobs summed per generation, fronts pooled."""
+    from matplotlib.ticker import MaxNLocator
+
     plt = _plt()
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.8), dpi=100)
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4.6), dpi=100)
+    groups: dict[tuple[str, str], list[dict]] = {}
     for h in history:
-        label = f"{short_spec(h['planner'])} / {h['attack']}"
-        if h["generations"]:
-            axes[0].plot([g.get("collisions", 0) for g in h["generations"]], "-o", ms=3, label=label)
-        front = np.asarray(h["pareto_front"], dtype=float)
-        if front.ndim == 2 and front.shape[1] >= 2:
-            axes[1].scatter(front[:, 0], front[:, 1], s=14, label=label)
-            names = h["objective_names"] or ["objective 1", "objective 2"]
+        groups.setdefault((h["planner"], h["attack"]), []).append(h)
+    # Distinct line styles and markers: identical searches (e.g. a guard that never intervenes)
+    # would otherwise hide each other.
+    styles, markers = ("-", "--", ":", "-."), "osD^v<>"
+    for i, ((planner, attack), runs) in enumerate(groups.items()):
+        depth = max(len(h["generations"]) for h in runs)
+        size = sum(g.get("evaluations", 0) for g in runs[0]["generations"][:1]) * len(runs)
+        label = (f"{short_spec(planner)} / {attack} ({len(runs)} search{'es' if len(runs) > 1 else ''}"
+                 f"{f', {size} evaluations a generation' if size else ''})")
+        if depth:
+            collisions = np.zeros(depth)
+            for h in runs:
+                collisions[:len(h["generations"])] += [g.get("collisions", 0) for g in h["generations"]]
+            axes[0].plot(np.arange(1, depth + 1), collisions, styles[i % 4], marker=markers[i % 7],
+                         ms=4, label=label)
+        fronts = [np.asarray(h["pareto_front"], dtype=float) for h in runs]
+        fronts = [f for f in fronts if f.ndim == 2 and f.shape[1] >= 2]
+        if fronts:
+            front = np.concatenate(fronts)
+            axes[1].scatter(front[:, 0], front[:, 1], s=18, marker=markers[i % 7], alpha=0.6, label=label)
+            names = runs[0]["objective_names"] or ["objective 1", "objective 2"]
             axes[1].set_xlabel(names[0])
             axes[1].set_ylabel(names[1] if len(names) > 1 else "objective 2")
+    axes[0].xaxis.set_major_locator(MaxNLocator(integer=True))
+    axes[0].yaxis.set_major_locator(MaxNLocator(integer=True))
     axes[0].set_xlabel("generation")
-    axes[0].set_ylabel("collisions")
+    axes[0].set_ylabel("collisions (summed over searches)")
     axes[0].set_title("collisions per generation", fontsize=10)
-    axes[1].set_title("Pareto front", fontsize=10)
+    axes[1].set_title("Pareto fronts (first two objectives)", fontsize=10)
     for ax in axes:
         ax.grid(alpha=0.3)
-        if ax.get_legend_handles_labels()[0]:
-            ax.legend(fontsize=7)
-    return _save(fig, path)
+    handles, labels = axes[0].get_legend_handles_labels()
+    if not handles:
+        handles, labels = axes[1].get_legend_handles_labels()
+    if handles:                        # one legend for both panels, below them
+        fig.legend(handles, labels, fontsize=7.5, loc="lower center", ncol=1 if len(labels) > 2 else 2,
+                   bbox_to_anchor=(0.5, 0.0))
+    return _save(fig, path, rect=(0, 0.045 * len(labels) + 0.03, 1, 1))

@@ -16,6 +16,10 @@ whose evaluation file exists is read back instead of being driven again.
 
 Parallel evaluation: pymoo's elementwise runner over a process pool (`--workers K`), or over Ray
 tasks (`--backend ray [--address ADDR]`); each worker builds its planner and env once.
+
+`search_in_process(config)` runs the same generations in the calling process without storing
+anything and returns a `SearchOutcome` (per-generation collisions, the Pareto front, the most
+critical vector); the campaign's search attacks (adversary.search_attack) call it.
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ import numpy as np
 from pymoo.core.problem import ElementwiseProblem
 
 from adversary.evaluate import EvaluationConfig, constraint_value, evaluate
+from adversary.objectives import OBJECTIVE_NAMES, collided_from_objectives, scene_alteration, unpenalised
 from adversary.templates import Template, get_template
 from rasterize.errors import InputError
 from riskmap.atomic import write_json
@@ -70,21 +75,24 @@ def evaluation_key(x: np.ndarray) -> str:
 class ScenarioProblem(ElementwiseProblem):
     """n_var = template parameters, F [3] (objectives module), G [1] braking constraint.
 
-    An evaluation already stored under `store` is read back instead of being driven again.
+    An evaluation already stored under `store` is read back instead of being driven again;
+    store None: nothing is stored.
     """
 
-    def __init__(self, template: Template, config: EvaluationConfig, store: Path, **kwargs):
-        super().__init__(n_var=len(template.parameters), n_obj=3, n_ieq_constr=1,
+    def __init__(self, template: Template, config: EvaluationConfig, store: Path | None, **kwargs):
+        super().__init__(n_var=len(template.parameters), n_obj=len(OBJECTIVE_NAMES), n_ieq_constr=1,
                          xl=template.lower, xu=template.upper, **kwargs)
-        self.template, self.config, self.store = template, config, Path(store)
+        self.template, self.config = template, config
+        self.store = None if store is None else Path(store)
 
     def _evaluate(self, x, out, *args, **kwargs):
-        path = self.store / f"{evaluation_key(x)}.json"
-        if path.exists():
+        path = None if self.store is None else self.store / f"{evaluation_key(x)}.json"
+        if path is not None and path.exists():
             record = json.loads(path.read_text())
         else:
             record = evaluate(self.template, x, self.config)
-            write_json(path, record)
+            if path is not None:
+                write_json(path, record)
         out["F"] = np.asarray(record["F"])
         out["G"] = np.array([record["G"]])
 
@@ -135,6 +143,98 @@ def _ray_starmap():
     return lambda function, iterable: ray.get([remote.remote(function, args) for args in iterable])
 
 
+def generations(problem: ScenarioProblem, config: SearchConfig):
+    """Yield each generation's evaluated pymoo Population (X [pop, n_var], F [pop, 3], G [pop, 1])
+    in order; the search is seeded by `config.seed`, so the same config yields the same vectors."""
+    from pymoo.algorithms.moo.nsga2 import NSGA2
+    from pymoo.core.evaluator import Evaluator
+    from pymoo.core.population import Population
+
+    evaluator = Evaluator()
+    rng = np.random.default_rng(config.seed)
+    if config.algorithm == "nsga2":
+        algorithm = NSGA2(pop_size=config.pop, eliminate_duplicates=True)
+        algorithm.setup(problem, termination=("n_gen", config.gen), seed=config.seed)
+    for _ in range(config.gen):
+        if config.algorithm == "nsga2":
+            batch = algorithm.ask()
+        else:
+            batch = Population.new("X", _random_batch(problem, config.pop, rng, problem.template))
+        evaluator.eval(problem, batch)
+        if config.algorithm == "nsga2":
+            algorithm.tell(infills=batch)
+        yield batch
+
+
+@dataclass(frozen=True)
+class SearchOutcome:
+    """What one search found. Objective rows are the scaled objectives without the collision
+    penalty (objectives.OBJECTIVE_NAMES), so that failures and near misses share one scale."""
+
+    generations: tuple[dict, ...]      # per generation {"evaluations": n, "collisions": k}
+    pareto_front: tuple[tuple[float, ...], ...]   # [m, 3] first front of the feasible evaluations
+    front_collided: tuple[bool, ...]   # [m] whether each front member collided
+    best_x: tuple[float, ...]          # the most critical vector (`most_critical`)
+    best_collided: bool
+    evaluations: int
+
+    def extra(self, template: Template) -> dict:
+        """JSON-ready `attack_extra` of a campaign record (the report reads the first three)."""
+        return {"generations": list(self.generations),
+                "pareto_front": [list(row) for row in self.pareto_front],
+                "objective_names": list(OBJECTIVE_NAMES),
+                "front_collided": list(self.front_collided),
+                "best_params": template.as_dict(np.asarray(self.best_x)),
+                "best_collided": self.best_collided,
+                "evaluations": self.evaluations}
+
+
+def most_critical(F: np.ndarray, G: np.ndarray, alteration: np.ndarray) -> int:
+    """Index of the most critical evaluation: a feasible collision if there is one, the least
+    altered among them (the search report's choice); else the feasible evaluation with the
+    smallest sum of scaled objectives (the nearest miss). Ties: the first evaluated.
+    F [n, 3] penalised, G [n] constraint, alteration [n]."""
+    feasible = np.flatnonzero(G <= 0)
+    if len(feasible) == 0:
+        raise InputError("the search found no feasible scenario; raise pop or generations")
+    collided = collided_from_objectives(F[feasible])
+    if collided.any():
+        failures = feasible[collided]
+        return int(failures[np.argmin(alteration[failures])])
+    return int(feasible[np.argmin(F[feasible].sum(axis=1))])
+
+
+def search_in_process(config: SearchConfig) -> SearchOutcome:
+    """Run the search in this process (no files, no progress bar); see `SearchOutcome`."""
+    from pymoo.util.nds.non_dominated_sorting import NonDominatedSorting
+
+    template = get_template(config.template)
+    problem = ScenarioProblem(template, config.evaluation, store=None)
+    xs, fs, gs, counts = [], [], [], []
+    for batch in generations(problem, config):
+        x, f, g = batch.get("X"), batch.get("F"), batch.get("G")[:, 0]
+        feasible = g <= 0
+        counts.append({"evaluations": len(x),
+                       "collisions": int(collided_from_objectives(f[feasible]).sum())})
+        xs.append(x)
+        fs.append(f)
+        gs.append(g)
+    X, F, G = np.concatenate(xs), np.concatenate(fs), np.concatenate(gs)
+    alteration = np.array([scene_alteration(x, template.neutral, template.lower, template.upper)
+                           for x in X])
+    best = most_critical(F, G, alteration)
+    feasible = np.flatnonzero(G <= 0)
+    front = feasible[NonDominatedSorting().do(F[feasible], only_non_dominated_front=True)]
+    front = front[np.lexsort(F[front].T[::-1])]       # a fixed order: by f1, then f2, f3
+    collided = collided_from_objectives(F)
+    return SearchOutcome(
+        generations=tuple(counts),
+        pareto_front=tuple(tuple(float(v) for v in unpenalised(F[i])) for i in front),
+        front_collided=tuple(bool(collided[i]) for i in front),
+        best_x=tuple(float(v) for v in X[best]), best_collided=bool(collided[best]),
+        evaluations=len(X))
+
+
 def search(config: SearchConfig, out: Path, resume: bool = False, progress: bool = True,
            frames: bool = True, backend: str = "local", address: str | None = None) -> dict:
     """Run the search; returns the summary (also OUT/summary.json, with figures under OUT).
@@ -145,9 +245,6 @@ def search(config: SearchConfig, out: Path, resume: bool = False, progress: bool
         raise InputError(f"--backend must be local or ray, got {backend!r}")
     from multiprocessing import get_context
 
-    from pymoo.algorithms.moo.nsga2 import NSGA2
-    from pymoo.core.evaluator import Evaluator
-    from pymoo.core.population import Population
     from pymoo.parallelization.starmap import StarmapParallelization
     from tqdm import tqdm
 
@@ -171,21 +268,11 @@ def search(config: SearchConfig, out: Path, resume: bool = False, progress: bool
     else:
         _worker_init()
     problem = ScenarioProblem(template, config.evaluation, out / "evaluations", **kwargs)
-    evaluator = Evaluator()
-    rng = np.random.default_rng(config.seed)
-    if config.algorithm == "nsga2":
-        algorithm = NSGA2(pop_size=config.pop, eliminate_duplicates=True)
-        algorithm.setup(problem, termination=("n_gen", config.gen), seed=config.seed)
     try:
-        for generation in tqdm(range(config.gen), disable=not progress,
-                               desc=f"{config.algorithm} {config.planner} {config.template}"):
-            if config.algorithm == "nsga2":
-                batch = algorithm.ask()
-            else:
-                batch = Population.new("X", _random_batch(problem, config.pop, rng, template))
-            evaluator.eval(problem, batch)
-            if config.algorithm == "nsga2":
-                algorithm.tell(infills=batch)
+        batches = generations(problem, config)
+        for generation, batch in enumerate(tqdm(batches, total=config.gen, disable=not progress,
+                                                desc=f"{config.algorithm} {config.planner} "
+                                                     f"{config.template}")):
             keys = [evaluation_key(x) for x in batch.get("X")]
             write_json(out / "generations" / f"gen_{generation:03d}.json",
                        {"generation": generation, "keys": keys})

@@ -25,13 +25,13 @@ def test_every_job_has_one_record_with_the_fields_of_the_brief(tiny_campaign):
     store = ResultStore(tiny_campaign)
     records = store.records()
     store.close()
-    assert len(records) == 8 and all(r["status"] == "ok" for r in records)
+    assert len(records) == 12 and all(r["status"] == "ok" for r in records)
     for r in records:
         for key in ("collided", "collided_with_adversary", "adversary_off_road", "other_off_road",
                     "kinematic_mps", "solution_found", "safety_pct", "progress_m", "error"):
             assert key in r
         assert 0.0 <= r["safety_pct"] <= 100.0
-        assert r["has_adversary"] == (r["attack"] == "aggressive_neighbour")
+        assert r["has_adversary"] == (r["attack"] != "natural")
         assert (r["kinematic_mps"] is not None) == r["collided"]
         assert (r["solution_found"] is not None) == r["collided"]
         assert (tiny_campaign / "artifacts" / f"{r['job_id']}.npz").is_file()
@@ -49,10 +49,10 @@ def test_interrupted_and_resumed_campaign_gives_the_same_report(tiny_campaign, t
     with pytest.raises(InputError, match="--resume"):
         run_campaign(tiny_config(), out, RunOptions(progress=False))
     second = run_campaign(tiny_config(), out, RunOptions(resume=True, progress=False))
-    assert second["ran"] == 5 and second["finished"] == 8
+    assert second["ran"] == 9 and second["finished"] == 12
     again = run_campaign(tiny_config(), out, RunOptions(resume=True, progress=False))
     assert again["ran"] == 0                        # nothing runs twice
-    assert len(list((out / "records").glob("*.json"))) == 8
+    assert len(list((out / "records").glob("*.json"))) == 12
     assert _results(out, tmp_path, "split_report") == _results(tiny_campaign, tmp_path, "full_report")
 
 
@@ -97,14 +97,19 @@ def test_report_page_has_every_image_and_only_filled_tables(tiny_campaign, tmp_p
     assert {"comparison", "by-family", "timing", "versions"} <= ids
     assert len(summary["images"]) >= 1 + 2 * 2          # metrics + gallery panels and strips
     text = page.read_text()
-    assert text.count("Not run in this campaign") == 3    # CRASH ablation, search, guard
+    assert text.count("Not run in this campaign") == 2    # CRASH ablation, guard
+    search_rows = next(t["rows"] for t in summary["tables"] if t["id"] == "search")
+    assert search_rows == len(TINY["planners"])          # one row per (search attack, planner)
+    assert "figures/search.png" in summary["images"]
     saved = json.loads((tmp_path / "report" / "report.json").read_text())
     rows = saved["results"]["comparison"]
     assert {(r["planner"], r["attack"]) for r in rows} == {
-        (p, a) for p in TINY["planners"] for a in ("natural", "aggressive_neighbour")}
+        (p, a) for p in TINY["planners"] for a in ("natural", "aggressive_neighbour", "nsga2_search")}
     for row in rows:
         rate = row["collision_rate"]
         assert rate["lo"] <= rate["value"] <= rate["hi"] and rate["n"] == 2
+    history = saved["results"]["search_history"]             # one per search job (2 planners x 2 scenes)
+    assert len(history) == 4 and all(len(h["generations"]) == 2 and h["pareto_front"] for h in history)
 
 
 def test_cli_prints_one_line_errors(tmp_path, capsys):

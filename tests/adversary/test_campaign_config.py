@@ -8,7 +8,7 @@ from tests.adversary.conftest import TINY
 def test_tiny_config_lists_every_job_once():
     config = campaign_from_dict(TINY)
     jobs = config.jobs()
-    assert len(jobs) == 2 * 2 * 2
+    assert len(jobs) == 2 * 2 * 3
     assert len({j.job_id for j in jobs}) == len(jobs)
     assert config.budget.episode_s == 3.0
 

@@ -13,7 +13,7 @@ def test_ray_backend_matches_local(tiny_campaign, tmp_path):
     pytest.importorskip("ray")
     out = tmp_path / "ray"
     counts = run_campaign(tiny_config(), out, RunOptions(backend="ray", workers=2, progress=False))
-    assert counts["finished"] == 8 and counts["failed"] == 0
+    assert counts["finished"] == 12 and counts["failed"] == 0
     ray_results = make_report(out, tmp_path / "ray_report")["results"]
     local_results = make_report(tiny_campaign, tmp_path / "local_report")["results"]
     assert ray_results == local_results
