@@ -118,7 +118,7 @@ class RiskMapPlanner:
             t["svf"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         waypoints = sample_trajectory(policy[0], start, self.horizon, self.grid, self.sampler,
-                                      seed=self.seed * 1_000_003 + self._calls)
+                                      seed=(self.seed * 1_000_003 + self._calls) % 2**32)  # any planner seed
         t["sampler"] = time.perf_counter() - t0
         self._calls += 1
         t["total"] = sum(t.values())
