@@ -1,0 +1,83 @@
+"""`adversary scenes` + `adversary attack` end to end with the shipped traffic model."""
+
+import json
+
+import pytest
+import torch
+
+from adversary.cli import main
+from adversary.crash.attack import AttackConfig
+from adversary.crash.run import record_scenes, run_attacks, summarise
+from adversary.crash.selection import SelectionModule
+from rasterize.errors import InputError
+from riskmap.checkpoint import save_checkpoint
+
+TRAFFIC = "checkpoints/crash_traffic_highway"
+
+
+@pytest.fixture(scope="module")
+def scenes(tmp_path_factory):
+    out = tmp_path_factory.mktemp("scenes") / "highway"
+    # seed 500 episode 1: the car ahead in the next lane can cut in front of the replayed human
+    record_scenes("highway-v0", 500, 2, out, first_episode=1, progress=False)
+    return out
+
+
+@pytest.fixture(scope="module")
+def selectors(tmp_path_factory):
+    """An untrained ASM pair: the plumbing of `--selector crash`, not its quality."""
+    out = tmp_path_factory.mktemp("selectors")
+    torch.manual_seed(0)
+    for name, mam in (("selector_mam", True), ("selector_no_mam", False)):
+        save_checkpoint(out / name, SelectionModule(64), {"mam": mam, "hidden": 64}, kind="crash_selector")
+    return out
+
+
+def test_distance_attack_on_replay_collides_and_resume_recomputes_nothing(scenes, tmp_path):
+    out = tmp_path / "attack"
+    config = AttackConfig(selector="distance")
+    summary = run_attacks("replay", scenes, 1, config, 0, out, TRAFFIC, None, progress=False)
+    record = json.loads((out / "attacks" / "scene_00001.json").read_text())
+    assert record["status"] == "ok" and record["collision"], record.get("metrics")
+    m = record["metrics"]
+    assert m["collision_iou"] > 0.02 and m["collision_type"] in ("cut-in", "side-swipe", "ego rear-ends")
+    assert record["p"][0] == 0.0 and abs(sum(record["p"]) - 1.0) < 1e-4
+    assert record["generation"]["iterations"] < 300          # stopped at the collision
+    assert summary["summary"]["collisions"] == 1 and summary["summary"]["scenes"] == 1
+    before = (out / "attacks" / "scene_00001.json").stat().st_mtime_ns
+    run_attacks("replay", scenes, 1, config, 0, out, TRAFFIC, None, resume=True, progress=False)
+    assert (out / "attacks" / "scene_00001.json").stat().st_mtime_ns == before
+    with pytest.raises(InputError, match="already holds attacks"):
+        run_attacks("replay", scenes, 1, config, 0, out, TRAFFIC, None, progress=False)
+    with pytest.raises(InputError, match="other settings"):
+        run_attacks("replay", scenes, 1, AttackConfig(selector="random"), 0, out, TRAFFIC, None,
+                    resume=True, progress=False)
+
+
+def test_crash_selector_closed_loop_batch_and_bad_input(scenes, selectors, tmp_path, capsys):
+    out = tmp_path / "idm"
+    config = AttackConfig(selector="crash", iterations_closed_loop=20, replan_every=10)
+    summary = run_attacks("idm", scenes, 2, config, 0, out, TRAFFIC, selectors, progress=False, batch_size=2)
+    records = [json.loads(p.read_text()) for p in sorted((out / "attacks").glob("*.json"))]
+    assert [r["status"] for r in records] == ["ok", "ok"]
+    for r in records:
+        assert r["timing"]["rollouts"] >= 2 and r["generation"]["replans"] >= 1
+        assert len(r["tracks"]) == r["agents"] - 1
+    assert summary["summary"]["scenes"] == 2
+    assert main(["attack", "--planner", "idm", "--scenes", str(scenes), "--count", "5",
+                 "--out", str(tmp_path / "x"), "--traffic-model", TRAFFIC, "--selector", "distance"]) == 2
+    assert "holds 2 scenes, fewer than --count 5" in capsys.readouterr().err
+    assert main(["attack", "--planner", "idm", "--scenes", str(scenes), "--count", "1", "--out",
+                 str(tmp_path / "y"), "--traffic-model", TRAFFIC, "--selector-model", str(tmp_path / "none")]) == 2
+    assert "not found" in capsys.readouterr().err
+
+
+def test_summary_counts_every_scene_in_the_denominator():
+    ok = {"status": "ok", "collision": True, "seconds": 1.0, "timing": {"rollouts": 1},
+          "generation": {"iterations": 10, "replans": 0},
+          "metrics": {"adversary_off_road": False, "other_off_road": True, "ego_off_road": False,
+                      "kinematic_value_mps": 4.0, "solution_found": True, "collision_type": "cut-in"}}
+    miss = {"status": "no_candidate", "collision": False, "seconds": 0.5}
+    s = summarise([ok, miss])
+    assert s["collision_rate"] == 0.5 and s["no_candidate"] == 1 and s["other_off_road_rate"] == 1.0
+    assert s["collision_types"] == {"cut-in": 1} and s["solution_rate"] == 1.0
