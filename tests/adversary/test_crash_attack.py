@@ -17,6 +17,7 @@ from adversary.report_check import report_problems
 from adversary.store import ResultStore
 from rasterize.errors import InputError
 
+
 @pytest.fixture(scope="module")
 def selector_dir(tmp_path_factory) -> Path:
     """Untrained selectors of the shipped traffic model's width (only their shape matters here)."""
@@ -118,7 +119,7 @@ def test_a_crash_job_reruns_to_the_same_record(crash_campaign, selector_dir):
 
 def test_a_scene_that_cannot_be_attacked_is_an_ok_record_counted_in_the_ablation(
         crash_campaign, selector_dir, monkeypatch, tmp_path):
-    import adversary.crash.scenes as scenes
+    from adversary.crash import scenes
 
     def human_crashed(*args, **kwargs):
         raise InputError("highway-v0 seed 0 episode 0: the human crashed at 3.1 s, before t0 + horizon")
