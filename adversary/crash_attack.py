@@ -13,7 +13,8 @@ A job (planner, env, scene seed, episode) records the human's episode up to t0 +
 for the job's scenario family (highway, intersection); the defaults are the shipped checkpoints.
 
 Differences to the episode attacks, all visible in the record:
-- the episode is t0 + 6 s long (8 s by default), not the campaign's budget.episode_s;
+- the episode is t0 + 6 s long (8 s by default) at 10 Hz with a plan every 0.5 s, CRASH's own
+  rates: the campaign's budget does not apply;
 - collisions are judged on box overlap (IoU > 0.02) from t0 on (adversary.crash.judge), with the
   ego passing through other boxes; `collided` is any such collision (or one before t0),
   `collided_with_adversary` the CRASH/STRIVE collision; kinematic value, collision type and the
@@ -182,7 +183,7 @@ def crash_job(job, planner) -> tuple[dict, bytes | None]:
     params: CrashAttackParams = job.attack_params
     scene = AttackScene(job.env_id, job.scene_seed, job.episode, params.t0_s)
     try:
-        record = record_attack_scene(scene, control_hz=job.budget.control_hz)
+        record = record_attack_scene(scene)   # 10 Hz: CRASH's judge drives at its own rates
     except InputError as error:
         return _not_attacked(str(error), {"selector": params.selector}), None
     traffic, selector = params.paths(job.env_id)
