@@ -86,7 +86,8 @@ class CrashAttackParams:
         return Path(self.traffic_model.format(family=family)), selector
 
     def check_envs(self, envs: list[str]) -> None:
-        """Every checkpoint the attack needs on `envs` exists (called when the config is read)."""
+        """Every checkpoint the attack needs on `envs` exists (adversary.campaign checks this
+        before a campaign starts)."""
         for env_id in envs:
             traffic, selector = self.paths(env_id)
             require(traffic.with_suffix(".json").is_file(),

@@ -64,14 +64,24 @@ def test_selectors_are_crash_own():
     ({"iterations": -1}, "iterations must be >= 0"),
     ({"t0_s": 1.0}, "use a multiple of 0.5 s that is >= 2.0"),
     ({"traffic_model": "runs/{env}"}, "the only placeholder allowed is {family}"),
-    ({"traffic_model": "runs/nothing_{family}", "selector": "distance"}, "train one with `adversary train-traffic`"),
-    ({"selector_model": "runs/nothing"}, "train selectors with `adversary train-selector`"),
 ])
 def test_bad_params_are_one_line_errors_naming_the_fix(selector_dir, params, fix):
     config = _config(selector_dir, attacks=[{"name": "crash", "params": params}])
     with pytest.raises(InputError) as error:
         campaign_from_dict(config)
     assert fix in str(error.value) and "\n" not in str(error.value)
+
+
+@pytest.mark.parametrize("params, fix", [
+    ({"traffic_model": "runs/nothing_{family}", "selector": "distance"}, "train one with `adversary train-traffic`"),
+    ({"selector_model": "runs/nothing"}, "train selectors with `adversary train-selector`"),
+])
+def test_missing_models_stop_the_campaign_before_any_job(selector_dir, tmp_path, params, fix):
+    config = campaign_from_dict(_config(selector_dir, attacks=[{"name": "crash", "params": params}]))
+    with pytest.raises(InputError) as error:
+        run_campaign(config, tmp_path / "c", RunOptions(progress=False))
+    assert fix in str(error.value) and "\n" not in str(error.value)
+    assert not (tmp_path / "c" / "campaign.json").exists()
 
 
 def test_a_selector_model_is_only_needed_by_learned_selectors(selector_dir):
