@@ -17,7 +17,8 @@ campaign config is read) and a category, which decides where the report shows it
 
     baseline     no perturbation (the `natural` episode)
     rule         hand-made adversarial behaviour (e.g. `aggressive_neighbour`)
-    selection    learned or distance-based adversary selection + generation (CRASH, STRIVE)
+    selection    learned or distance-based adversary selection + generation (CRASH, STRIVE);
+                 `crash` runs on the job's recorded scene, not through the hooks (adversary.crash_attack)
     search       black-box scenario search (NSGA-II, random); these do not use the hooks: the job
                  runs a search and replays its most critical scenario (adversary.search_attack)
 
@@ -67,7 +68,7 @@ def register_attack(name: str, params_type: type, factory: Callable[[Any, int], 
 
 def _register_builtin() -> None:
     # Importing a module registers its attacks.
-    from adversary import aggressive, search_attack  # noqa: F401  (aggressive_neighbour; *_search)
+    from adversary import aggressive, crash_attack, search_attack  # noqa: F401  (aggressive_neighbour; crash; *_search)
 
 
 def attack_entry(name: str) -> AttackEntry:

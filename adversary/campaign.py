@@ -38,6 +38,15 @@ def check_planners(config: CampaignConfig) -> None:
         make_planner(spec, seed=config.seed)
 
 
+def check_attack_models(config: CampaignConfig) -> None:
+    """Every checkpoint an attack needs on its scenario families exists (e.g. the crash attack's
+    traffic models and selectors) before any job starts."""
+    envs = sorted({family.env for family in config.scenarios})
+    for attack, (_name, params) in zip(config.attacks, config.attack_params().values()):
+        if hasattr(params, "check_envs"):
+            params.check_envs([env for env in envs if attack.applies_to(env)])
+
+
 def _campaign_meta(config: CampaignConfig, config_text: str | None) -> dict:
     return {"config": to_plain(config), "config_text": config_text,
             "jobs": [job.job_id for job in config.jobs()]}
@@ -61,6 +70,7 @@ def run_campaign(config: CampaignConfig, out: Path, options: RunOptions = RunOpt
     elif out.exists() and any(out.iterdir()) and not options.resume:
         raise InputError(f"--out {out} is not empty; choose a new directory")
     check_planners(config)
+    check_attack_models(config)
     write_json(meta_path, {**meta, **provenance()})
     store = ResultStore(out)
     jobs = config.jobs()

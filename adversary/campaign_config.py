@@ -10,6 +10,7 @@
       - {name: natural}
       - {name: aggressive_neighbour, label: aggr-nearest, params: {selection: nearest}}
       - {name: nsga2_search, envs: [highway-v0], params: {template: cut_in, pop: 6, generations: 3}}
+      - {name: crash, label: MAM+ASM, params: {selector: crash, iterations: 60}}   # CRASH
     budget: {episode_s: 10, control_hz: 10, replan_hz: 2}
     safety: {close_gap_m: 2.0, ttc_s: 1.5, radius_m: 40, off_road_margin_m: 1.0}
     report: {gallery: 3}

@@ -84,8 +84,14 @@ def _trajectories(ax, scene, adversary: int) -> None:
 
 
 def gallery_figures(artifact: Path, env_id: str, out_dir: Path, stem: str, title: str
-                    ) -> tuple[str, str]:
-    """(panel PNG name, strip PNG name) written into out_dir for one job's artifact."""
+                    ) -> tuple[str, str | None]:
+    """(panel PNG name, strip PNG name) written into out_dir for one job's artifact; a crash
+    attack's artifact holds its own panel (adversary.crash.panel) and no strip."""
+    with np.load(artifact) as data:
+        if "crash_panel_png" in data.files:
+            panel = out_dir / f"{stem}_panels.png"
+            panel.write_bytes(data["crash_panel_png"].tobytes())
+            return panel.name, None
     import matplotlib
 
     matplotlib.use("Agg")

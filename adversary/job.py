@@ -7,7 +7,9 @@ in which order jobs run, so a resumed or distributed campaign gives the same num
 
 Attacks of category "search" do not perturb the job's scene through episode hooks: their job runs
 a seeded scenario search against the planner and replays the most critical scenario found
-(`_search_and_replay`, adversary.search_attack); every other category drives the scene (`_drive`).
+(`_search_and_replay`, adversary.search_attack); the `crash` attack (category "selection") runs
+CRASH on the job's recorded scene (`_crash`, adversary.crash_attack); every other attack drives
+the scene with its hooks (`_drive`).
 """
 
 from __future__ import annotations
@@ -135,7 +137,7 @@ def _artifact(monitor: EpisodeMonitor, recording: RecordingPlanner | None, env_i
 
 
 def _drive(job: Job) -> tuple[dict, bytes]:
-    """Drive the job's scene with its attack's hooks (categories baseline, rule, selection)."""
+    """Drive the job's scene with its attack's hooks (categories baseline, rule)."""
     from riskmap.drive import DriveConfig, DriveHooks, drive_episode
     from riskmap.registry import HumanDriver
 
@@ -181,6 +183,20 @@ def _search_and_replay(job: Job) -> tuple[dict, bytes]:
     return record, _artifact(monitor, recordings[0], SEARCH_ENV_ID)
 
 
+def _crash(job: Job) -> tuple[dict, bytes | None]:
+    """One CRASH attack on the job's recorded scene (adversary.crash_attack)."""
+    from adversary.crash_attack import crash_job
+
+    return crash_job(job, _planner(job.planner, job.planner_seed))
+
+
+def _runner(attack_name: str):
+    """The function that runs a job of this attack (module docstring)."""
+    if attack_name == "crash":
+        return _crash
+    return _search_and_replay if attack_entry(attack_name).category == "search" else _drive
+
+
 def _record(episode: dict, monitor: EpisodeMonitor, extra: dict) -> dict:
     """The job's measurements from one driven episode and its monitor."""
     from adversary.solution import ego_only_solution
@@ -222,8 +238,7 @@ def run_job(job: Job) -> dict:
         import torch
 
         torch.set_num_threads(1)
-        search = attack_entry(job.attack_name).category == "search"
-        record, artifact = (_search_and_replay if search else _drive)(job)
+        record, artifact = _runner(job.attack_name)(job)
         result = {"record": {**job.describe(), "status": "ok", "error": None, **record},
                   "artifact": artifact}
     except Exception as error:  # noqa: BLE001  (a failing job is recorded and the campaign goes on)

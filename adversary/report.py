@@ -57,6 +57,18 @@ def _environment():
     return env
 
 
+def _outcome(worst: dict) -> str:
+    """A worst scene's outcome in a few words (a crash attack measures no Safety %, and its
+    collisions with other vehicles than the adversary have no type or kinematic value)."""
+    if worst["collided"]:
+        if worst["kinematic_mps"] is None:
+            return "collision (not with the adversary)"
+        return f"collision ({worst['collision_type']}, {worst['kinematic_mps']:.1f} m/s)"
+    if worst["safety_pct"] is None:
+        return "no collision"
+    return f"no collision, Safety {worst['safety_pct']:.0f}%"
+
+
 def make_report(campaign_dir: Path, out_dir: Path | None = None) -> dict:
     """Write report.html, report.json and the PNGs into out_dir (default: the campaign dir)."""
     campaign_dir = Path(campaign_dir)
@@ -90,12 +102,10 @@ def make_report(campaign_dir: Path, out_dir: Path | None = None) -> dict:
         artifact = campaign_dir / "artifacts" / f"{worst['job_id']}.npz"
         if not artifact.is_file():
             continue
-        what = (f"collision ({worst['collision_type']}, {worst['kinematic_mps']:.1f} m/s)"
-                if worst["collided"] else f"no collision, Safety {worst['safety_pct']:.0f}%")
         title = (f"#{rank + 1} {short_spec(worst['planner'])} | {worst['env_id']} seed {worst['scene_seed']} "
-                 f"episode {worst['episode']} | {worst['attack']}: {what}")
+                 f"episode {worst['episode']} | {worst['attack']}: {_outcome(worst)}")
         panel, strip = gallery_figures(artifact, worst["env_id"], figures, f"worst_{rank + 1}", title)
-        gallery.append({**worst, "title": title, "panel": f"figures/{panel}", "strip": f"figures/{strip}"})
+        gallery.append({**worst, "title": title, "panel": f"figures/{panel}", "strip": strip and f"figures/{strip}"})
     results["gallery_images"] = [{"job_id": g["job_id"], "panel": g["panel"], "strip": g["strip"]}
                                  for g in gallery]
     attacks = {a["label"] or a["name"]: a["name"] for a in meta["config"]["attacks"]}

@@ -10,7 +10,12 @@ Rates carry Wilson intervals, means percentile-bootstrap intervals (adversary.st
     kinematic value (m/s)    mean |v_ego - v_partner| over collisions
     solution rate            collisions the ego alone could have avoided / collisions
     Safety %                 mean (and 90th percentile) over jobs of the per-episode Safety %
+                             (jobs that do not measure it, e.g. the crash attack's, are left out)
     progress (m)             mean distance driven
+
+The CRASH ablation (attacks of category "selection") has one row per (attack label, planner), as
+CRASH's Table III: its collision rate is collisions with the adversary over every finished job,
+scenes that could not be attacked included (`not_attacked` counts them).
 
 Timings (plan ms, wall s) depend on the machine; they sit apart under "timing".
 """
@@ -24,7 +29,7 @@ import numpy as np
 from adversary.stats import bootstrap_mean, wilson
 from rasterize.config import family_of_env
 
-COLLISION_TYPES = ("ego rear-ends", "ego rear-ended", "sideswipe", "side (angle)", "head-on")
+COLLISION_TYPES = ("ego rear-ends", "ego rear-ended", "sideswipe", "side (angle)", "head-on", "cut-in")
 
 
 def _group_metrics(records: list[dict]) -> dict:
@@ -43,6 +48,35 @@ def _group_metrics(records: list[dict]) -> dict:
         "safety_pct": bootstrap_mean([r["safety_pct"] for r in ok]),
         "progress_m": bootstrap_mean([r["progress_m"] for r in ok]),
     }
+
+
+def _ablation_metrics(records: list[dict]) -> dict:
+    """The CRASH ablation's numbers of one (attack, planner) group (module docstring)."""
+    ok = [r for r in records if r["status"] == "ok"]
+    attacked = [r for r in ok if r.get("attacked", True)]
+    hits = [r for r in ok if r["collided_with_adversary"]]
+    solved = [r for r in hits if r.get("solution_found") is not None]
+    return {
+        "jobs": len(records), "failed": len(records) - len(ok), "not_attacked": len(ok) - len(attacked),
+        "adversary_collision_rate": wilson(len(hits), len(ok)),
+        "collision_rate": wilson(sum(bool(r["collided"]) for r in ok), len(ok)),
+        "adversary_off_road": wilson(sum(bool(r["adversary_off_road"]) for r in attacked), len(attacked)),
+        "other_off_road": wilson(sum(bool(r["other_off_road"]) for r in attacked), len(attacked)),
+        "kinematic_mps": bootstrap_mean([r["kinematic_mps"] for r in hits]),
+        "solution_rate": wilson(sum(bool(r["solution_found"]) for r in solved), len(solved)),
+    }
+
+
+def _ablation(records: list[dict]) -> tuple[list[dict], list[dict]] | tuple[None, None]:
+    """(rows, timing rows) of the CRASH ablation, in the same (attack, planner) order."""
+    groups: dict[tuple, list[dict]] = defaultdict(list)
+    for r in records:
+        groups[r["attack"], r["planner"]].append(r)
+    if not groups:
+        return None, None
+    keys = sorted(groups)
+    return ([{"attack": a, "planner": p, **_ablation_metrics(groups[a, p])} for a, p in keys],
+            [{"attack": a, "planner": p, **_timing(groups[a, p])} for a, p in keys])
 
 
 def _timing(records: list[dict]) -> dict:
@@ -69,7 +103,9 @@ def _collision_types(records: list[dict]) -> list[dict]:
     counts: dict[tuple, Counter] = defaultdict(Counter)
     for r in records:
         if r["status"] == "ok":
-            counts[r["planner"], r["attack"]].update([r["collision_type"]] if r["collided"] else [])
+            # a crash attack's collision with a vehicle other than its adversary has no type
+            counts[r["planner"], r["attack"]].update([r["collision_type"]] if r["collided"]
+                                                     and r["collision_type"] else [])
     return [{"planner": p, "attack": a, **{t: counts[p, a][t] for t in COLLISION_TYPES},
              "total": sum(counts[p, a].values())} for p, a in sorted(counts)]
 
@@ -108,7 +144,7 @@ def worst_scenes(records: list[dict], count: int) -> list[dict]:
     the most dangerous Safety %; ties by job id."""
     ok = [r for r in records if r["status"] == "ok"]
     ok.sort(key=lambda r: (not r["collided"], not r["collided_with_adversary"],
-                           -(r["kinematic_mps"] or 0.0), -r["safety_pct"], r["job_id"]))
+                           -(r["kinematic_mps"] or 0.0), -(r["safety_pct"] or 0.0), r["job_id"]))
     return ok[:count]
 
 
@@ -120,13 +156,14 @@ def report_numbers(records: list[dict], gallery: int) -> tuple[dict, dict]:
     by_family, _ = _rows(records, ("family", "planner", "attack"))
     selection = [r for r in records if r["attack_category"] == "selection"]
     search = [r for r in records if r["attack_category"] == "search"]
+    ablation, ablation_timing = _ablation(selection)
     results = {
         "jobs": len(records),
         "failed": sum(r["status"] != "ok" for r in records),
         "comparison": comparison,
         "by_family": by_family,
         "collision_types": _collision_types(records),
-        "crash_ablation": _rows(selection, ("attack", "planner"))[0] if selection else None,
+        "crash_ablation": ablation,
         "search": _rows(search, ("attack", "planner"))[0] if search else None,
         "search_history": _search_history(records),
         "guard": _guard_pairs(comparison) or None,
@@ -137,4 +174,4 @@ def report_numbers(records: list[dict], gallery: int) -> tuple[dict, dict]:
         "failures": [{"job_id": r["job_id"], "error": r["error"]}
                      for r in records if r["status"] != "ok"],
     }
-    return results, {"by_planner_attack": timing_rows, **_timing(records)}
+    return results, {"by_planner_attack": timing_rows, "crash_ablation": ablation_timing, **_timing(records)}

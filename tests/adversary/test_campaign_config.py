@@ -20,7 +20,7 @@ def test_tiny_config_lists_every_job_once():
     ({"scenarios": [{"env": "highway-v0", "episodes": 0}]}, "episodes must be >= 1"),
     ({"scenarios": [{"env": "highway-v0", "episodes": "two"}]}, "episodes: expected int"),
     ({"scenarios": [{"env": "highway-v0", "planners": ["riskmap:x"]}]}, "not in the campaign's planners"),
-    ({"attacks": [{"name": "crash"}]}, "unknown attack 'crash'"),
+    ({"attacks": [{"name": "strive"}]}, "unknown attack 'strive'"),
     ({"attacks": [{"name": "natural"}, {"name": "natural"}]}, "used twice"),
     ({"attacks": [{"name": "aggressive_neighbour", "params": {"speed": 3}}]}, "unknown key 'speed'"),
     ({"attacks": [{"name": "aggressive_neighbour", "params": {"selection": "random"}}]}, "softmin or nearest"),
