@@ -159,7 +159,7 @@ def train_selector(traffic_checkpoint: Path, data: list[Path], out: Path,
                 optimiser.zero_grad()
                 loss.backward()
                 optimiser.step()
-                total += float(loss)
+                total += loss.item()
         name = "selector_mam" if mam else "selector_no_mam"
         picks = []
         with torch.no_grad():
