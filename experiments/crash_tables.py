@@ -64,6 +64,9 @@ def collect() -> None:
             for planner, selector, swept in runs:
                 k = PLANNER_K[planner] if swept is None else swept
                 attacks = sorted((run_dir(family, planner, selector, k if k != 20 else None) / "attacks").glob("*.json"))
+                if part == "k":        # compare k on the same scenes: those of the smallest sweep run
+                    swept_names = {p.name for p in (run_dir(family, "idm", "crash", K_VALUES[0]) / "attacks").glob("*.json")}
+                    attacks = [p for p in attacks if p.name in swept_names]
                 if not attacks:
                     continue
                 # Finished or not: every scene attacked so far counts (the table gives the denominator).
@@ -93,7 +96,8 @@ def main() -> None:
     only = {tuple(x.split(":")) for x in args.only.split(",") if x}
     if args.part == "k":
         for k in K_VALUES:
-            attack(args.family, "idm", "crash", args.count, args.workers, k)
+            if k != PLANNER_K["idm"]:        # that one is the table run itself (a superset)
+                attack(args.family, "idm", "crash", args.count, args.workers, k)
         return
     for planner, selector in TABLE1 if args.part == "table1" else TABLE3:
         if only and (planner, selector) not in only:
