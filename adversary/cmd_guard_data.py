@@ -10,7 +10,7 @@ from pathlib import Path
 def _run_guard_data(args: argparse.Namespace) -> int:
     from adversary.crash.guard_data import GuardDataConfig, export
 
-    config = GuardDataConfig(split=args.split, val_fraction=args.val_fraction)
+    config = GuardDataConfig(split=args.split, val_fraction=args.val_fraction, cut=args.cut)
     summary = export([Path(d) for d in args.attacks], Path(args.out), config, resume=args.resume,
                      progress=not args.quiet)
     for split, c in summary["splits"].items():
@@ -31,6 +31,9 @@ def add_parser(subparsers) -> None:
                    help="split of the windows, e.g. adversarial (held-out test) or train")
     p.add_argument("--val-fraction", type=float, default=0.0,
                    help="the last share of each run's scenes goes to the val split")
+    p.add_argument("--cut", default="contact", choices=("contact", "judge"),
+                   help="cut a collision at the onset of the box contact (as highway-env ends natural "
+                        "episodes) or at the judged step (IoU > 0.02)")
     p.add_argument("--resume", action="store_true")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(handler=_run_guard_data)

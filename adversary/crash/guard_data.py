@@ -9,7 +9,15 @@ collision would be labelled as normal driving) and turned into guard windows wit
 `riskmap.guard.dataset.extract_windows` (crashed at the cut: positives end 0.1 s ... 1 s before
 it, against the neighbour with the smallest d_s there, which must be the adversary when the
 first collision is the adversary's); a record without one gives negatives only, over the whole
-rollout. Records whose ego already collided before the attack time t0 are skipped (the attack
+rollout.
+
+Where the cut lies: highway-env ends a natural episode at the first contact of two boxes, so the
+natural positives end 0.1 ... 1 s before the first touch. The judge's collision (IoU > 0.02)
+comes later, once the boxes are well inside each other (in a slow side-swipe, seconds later);
+windows ending at it would show overlapping boxes, which no natural positive does. By default
+(`cut="contact"`) the recording is therefore cut at the onset of that contact: the first step of
+the unbroken run of box overlap (IoU > 0) with the collision partner that leads to the judged
+collision; `cut="judge"` cuts at the judged step itself. Records whose ego already collided before the attack time t0 are skipped (the attack
 was moot there), as are records without tracks (no candidate, errors).
 
 Layout: the guard dataset's (`riskmap.guard.dataset`): GUARD_DIR/jobs/<split>_adv_<env>_<planner>_
@@ -37,18 +45,22 @@ from riskmap.guard.dataset import GuardCollectConfig, extract_windows, split_cou
 from riskmap.provenance import provenance
 
 SPLIT_CHARS = set("abcdefghijklmnopqrstuvwxyz0123456789")
+CUTS = ("contact", "judge")
 
 
 @dataclass(frozen=True)
 class GuardDataConfig:
     split: str = "adversarial"
     val_fraction: float = 0.0       # share of each run's scenes (the last ones) that go to "val"
+    cut: str = "contact"            # where a collision cuts the recording (module docstring)
     # Window settings shared with `riskmap guard collect` (control rate, max d_s, negatives).
     windows: GuardCollectConfig = field(default_factory=GuardCollectConfig)
 
     def __post_init__(self) -> None:
         if not self.split or not set(self.split) <= SPLIT_CHARS:
             raise InputError(f"--split {self.split!r} must be a non-empty lower-case word (letters, digits)")
+        if self.cut not in CUTS:
+            raise InputError(f"--cut {self.cut!r} must be one of {', '.join(CUTS)}")
         if not 0.0 <= self.val_fraction < 1.0:
             raise InputError(f"--val-fraction {self.val_fraction} must be in [0, 1)")
 
@@ -99,8 +111,29 @@ def collision_step(metrics: dict, dt_s: float) -> int | None:
     return round(metrics["collision_any_time_s"] / dt_s)
 
 
-def rollout_windows(record, attack: dict, planner, config: GuardCollectConfig, rng: np.random.Generator
-                    ) -> tuple[dict[str, np.ndarray] | None, dict]:
+def contact_onset(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, ego: int, step: int
+                  ) -> tuple[int, int]:
+    """(first step, partner) of the unbroken box overlap between the ego and the agent it overlaps
+    most at `step` (states [A, S, 6], valid [A, S], sizes [A, 2]), walking back from `step`."""
+    from adversary.crash.judge import box_iou
+
+    def iou(agent: int, k: int) -> float:
+        if not (valid[agent, k] and valid[ego, k]):
+            return 0.0
+        return box_iou(states[ego, k], sizes[ego], states[agent, k], sizes[agent])
+
+    others = [a for a in range(len(states)) if a != ego and valid[a, step]]
+    partner = max(others, key=lambda a: iou(a, step))
+    if iou(partner, step) <= 0.0:
+        raise InputError(f"the ego overlaps no box at step {step}; the collision step is wrong")
+    first = step
+    while first > 0 and iou(partner, first - 1) > 0.0:
+        first -= 1
+    return first, partner
+
+
+def rollout_windows(record, attack: dict, planner, config: GuardCollectConfig, rng: np.random.Generator,
+                    cut_at: str = "contact") -> tuple[dict[str, np.ndarray] | None, dict]:
     """(windows as `extract_windows`, meta) of one attack record; windows None when skipped."""
     from adversary.crash.judge import judge, rollout
 
@@ -118,13 +151,16 @@ def rollout_windows(record, attack: dict, planner, config: GuardCollectConfig, r
             "adversary_recorder_id": adversary, "ego_recorder_id": int(result.ego)}
     if metrics["collision_before_t0"]:
         return None, {**meta, "skipped": "the ego collided before t0"}
-    cut = collision_step(metrics, result.dt_s)
+    judged = collision_step(metrics, result.dt_s)
+    cut = judged
+    if judged is not None and cut_at == "contact":
+        cut, _ = contact_onset(result.states, result.valid, result.sizes, result.ego, judged)
     end = result.states.shape[1] if cut is None else cut + 1
     states, valid = result.states[:, :end], result.valid[:, :end]
     kinds = recorder_kinds(record.log.kinds, result.log_ids)
     windows = extract_windows(states, valid, result.sizes, kinds, result.ego, cut is not None, config, rng)
     partners = sorted({int(i) for i in windows["neighbour"][windows["label"] == 1]})
-    meta.update({"collided": cut is not None, "cut_step": cut,
+    meta.update({"collided": cut is not None, "cut_step": cut, "judged_step": judged, "cut_at": cut_at,
                  "first_collision_is_adversary": cut is not None and metrics["collision"]
                  and metrics["collision_time_s"] == metrics["collision_any_time_s"],
                  "positive_partners": partners, "partner_is_adversary": partners == [adversary] if partners else None,
@@ -163,7 +199,7 @@ def export(attack_dirs: list[Path], out: Path, config: GuardDataConfig = GuardDa
         record = load_record(run.scenes / f"{name}.npz")
         planner = cached_planner(run.planner, run.seed)
         rng = np.random.default_rng([zlib.crc32(job.encode()), 11])
-        windows, meta = rollout_windows(record, attack, planner, config.windows, rng)
+        windows, meta = rollout_windows(record, attack, planner, config.windows, rng, config.cut)
         meta = {"split": split, "job": job, "attack": str(run.path / "attacks" / f"{name}.json"),
                 "planner": run.planner, "selector": run.selector, "env_id": scene["env_id"],
                 "scene_seed": scene["scene_seed"], "episode": scene["episode"], **meta}

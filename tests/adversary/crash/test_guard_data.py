@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from adversary.cli import main as adversary_main
-from adversary.crash.guard_data import GuardDataConfig, export, job_name, recorder_kinds
-from adversary.crash.judge import braking_track, cached_planner, judge, rollout
+from adversary.crash.guard_data import GuardDataConfig, contact_onset, export, job_name, recorder_kinds
+from adversary.crash.judge import box_iou, braking_track, cached_planner, judge, rollout
 from adversary.crash.scenes import AttackScene, record_attack_scene, save_record
 from rasterize.errors import InputError
 from rasterize.scene import AgentKind
@@ -64,9 +64,15 @@ def test_positive_windows_end_before_the_collision_and_name_the_adversary(attack
     name = job_name("adversarial", "highway-v0", "replay", "manual", 0, "scene_00000")
     meta = json.loads((tmp_path / "jobs" / f"{name}.json").read_text())
     windows = dict(np.load(tmp_path / "jobs" / f"{name}.npz"))
-    cut = round(crash["metrics"]["collision_time_s"] / result.dt_s)
+    judged = round(crash["metrics"]["collision_time_s"] / result.dt_s)
     adversary = int(result.row_ids(record)[AHEAD])
-    assert meta["collided"] and meta["cut_step"] == cut and meta["adversary_recorder_id"] == adversary
+    assert meta["collided"] and meta["judged_step"] == judged and meta["adversary_recorder_id"] == adversary
+    # Cut at the first touch of the boxes that the judged collision (IoU > 0.02) belongs to.
+    cut = meta["cut_step"]
+    s, sz, ego = result.states, result.sizes, result.ego
+    assert cut <= judged and all(box_iou(s[ego, k], sz[ego], s[adversary, k], sz[adversary]) > 0
+                                 for k in range(cut, judged + 1))
+    assert box_iou(s[ego, cut - 1], sz[ego], s[adversary, cut - 1], sz[adversary]) == 0.0
     positive = windows["label"] == 1
     # One positive window per 10 Hz step over the label horizon before the collision, none at it.
     np.testing.assert_array_equal(np.sort(windows["last_step"][positive]),
@@ -98,6 +104,32 @@ def test_val_fraction_sends_the_last_scenes_to_val_and_resume_is_required(attack
         export([root / "run"], tmp_path, config, progress=False)
     again = export([root / "run"], tmp_path, config, resume=True, progress=False)
     assert again["splits"] == summary["splits"]
+
+
+@pytest.mark.slow
+def test_judge_cut_ends_the_windows_at_the_judged_collision(attack_run, tmp_path):
+    root, _, crash, result = attack_run
+    export([root / "run"], tmp_path, GuardDataConfig(cut="judge"), progress=False)
+    name = job_name("adversarial", "highway-v0", "replay", "manual", 0, "scene_00000")
+    meta = json.loads((tmp_path / "jobs" / f"{name}.json").read_text())
+    windows = dict(np.load(tmp_path / "jobs" / f"{name}.npz"))
+    assert meta["cut_step"] == meta["judged_step"] == round(crash["metrics"]["collision_time_s"] / result.dt_s)
+    assert windows["last_step"][windows["label"] == 1].max() == meta["cut_step"] - 1
+
+
+def test_contact_onset_walks_back_over_the_unbroken_overlap():
+    # Ego (agent 0) at x = 0; agent 1 approaches from 10 m to overlapping, then stays; agent 2 far.
+    xs = np.array([10.0, 7.0, 5.5, 4.0, 3.0, 3.0])
+    states = np.zeros((3, len(xs), 6))
+    states[..., 2] = 1.0
+    states[1, :, 0] = xs
+    states[2, :, 1] = 50.0
+    valid = np.ones((3, len(xs)), bool)
+    sizes = np.array([[5.0, 2.0]] * 3)
+    # Boxes 5 m long touch below 5 m between centres: overlap from step 3 (x = 4) on.
+    assert contact_onset(states, valid, sizes, 0, 5) == (3, 1)
+    with pytest.raises(InputError):
+        contact_onset(states, valid, sizes, 0, 1)
 
 
 @pytest.mark.slow
