@@ -54,8 +54,9 @@ def variant_planner(variant: str, inner_spec: str, seed: int):
 
 
 def cell_name(variant: str) -> str:
+    """The output folder of a variant: tgat@runs/guard/x/best -> tgat@x-best."""
     base, _, checkpoint = variant.partition("@")
-    return f"{base}@{Path(checkpoint).name}" if checkpoint else base
+    return f"{base}@{'-'.join(Path(checkpoint).parts[-2:])}" if checkpoint else base
 
 
 def drive_record(record, attack: dict, variant: str, seed: int) -> dict:
@@ -78,6 +79,9 @@ def drive_record(record, attack: dict, variant: str, seed: int) -> dict:
         summary = guard.summary()
         out["guard"] = {k: summary[k] for k in ("frames", "interventions", "intervention_ratio", "single",
                                                 "sustained")}
+        # when System 2 took over (s of the episode) and the TGAT's highest score then
+        out["guard"]["interventions_s"] = [e["time_s"] for e in guard.log]
+        out["guard"]["max_scores"] = [e["max_score"] for e in guard.log]
         out["guard"]["system1_ms_median"] = float(np.median(summary["system1_ms"])) if summary["system1_ms"] else None
         out["guard"]["system2_ms_median"] = float(np.median(summary["system2_ms"])) if summary["system2_ms"] else None
     return out
