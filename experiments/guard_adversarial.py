@@ -32,17 +32,43 @@ from adversary.crash.judge import cached_planner, judge, rollout
 from adversary.crash.scenes import load_record
 from riskmap.atomic import write_json
 
-VARIANT_PREFIX = {"alone": "", "always": "guard-always:", "tgat": "guard:"}
+VARIANT_PREFIX = {"alone": "", "always": "guard-always:", "tgat": "guard:", "tgat-anyspeed": "guard:"}
 
 
 _GUARDED: dict = {}
 
 
+def anyspeed_guard(inner_spec: str, seed: int, checkpoint: str = ""):
+    """The TGAT-triggered guard whose plans act at any speed (speed threshold 0 m/s in every
+    family instead of 20 m/s highway / 5 m/s intersection): tests whether the threshold, rather
+    than System 1, keeps the guard from acting."""
+    from riskmap.guard.guarded import GUARD_CHECKPOINT, GuardConfig, GuardedHumanDriver, GuardedPlanner
+    from riskmap.guard.predictor import AccidentPredictor
+    from riskmap.guard.system2 import DecelerationAgent, System2Config
+    from riskmap.registry import HumanDriver, make_planner
+
+    families = GuardConfig().speed_threshold_mps
+    config = GuardConfig(trigger="tgat", speed_threshold_mps={family: 0.0 for family in families},
+                         default_speed_threshold_mps=0.0)
+    predictor = AccidentPredictor.load(checkpoint or GUARD_CHECKPOINT)
+    agent = DecelerationAgent(System2Config(decel_mps2=config.decel_mps2, control_hz=config.decision_hz))
+    inner = make_planner(inner_spec, seed=seed)
+    if isinstance(inner, HumanDriver):
+        return GuardedHumanDriver(predictor, agent, config)
+    return GuardedPlanner(inner, predictor, agent, config)
+
+
 def variant_planner(variant: str, inner_spec: str, seed: int):
-    """(planner, SPEC) of `variant`: alone, always, tgat, or tgat@CKPT (the TGAT trigger with the
-    guard checkpoint CKPT, a path without suffix, instead of the shipped one)."""
+    """(planner, SPEC) of `variant`: alone, always, tgat, tgat@CKPT (the TGAT trigger with the
+    guard checkpoint CKPT, a path without suffix, instead of the shipped one), tgat-anyspeed or
+    tgat-anyspeed@CKPT (`anyspeed_guard`)."""
     base, _, checkpoint = variant.partition("@")
     spec = VARIANT_PREFIX[base] + inner_spec
+    if base == "tgat-anyspeed":
+        key = (variant, inner_spec, seed)
+        if key not in _GUARDED:
+            _GUARDED[key] = anyspeed_guard(inner_spec, seed, checkpoint)
+        return _GUARDED[key], f"{spec} (plans at any speed{', guard checkpoint ' + checkpoint if checkpoint else ''})"
     if not checkpoint:
         return cached_planner(spec, seed), spec
     from riskmap.guard.guarded import make_guarded
