@@ -13,7 +13,7 @@ from rasterize.errors import InputError
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from adversary import cmd_crash, cmd_report, cmd_search, cmd_stress_test
+    from adversary import cmd_crash, cmd_guard_data, cmd_report, cmd_search, cmd_stress_test
 
     parser = argparse.ArgumentParser(prog="adversary", description=__doc__.splitlines()[0])
     subparsers = parser.add_subparsers(dest="command", required=True)
@@ -21,6 +21,7 @@ def build_parser() -> argparse.ArgumentParser:
     cmd_report.add_parser(subparsers)
     cmd_search.add_parsers(subparsers)
     cmd_crash.add_parsers(subparsers)
+    cmd_guard_data.add_parser(subparsers)
     return parser
 
 

@@ -34,6 +34,21 @@ def cmd_train(args: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_evaluate(args: argparse.Namespace) -> int:
+    from riskmap.atomic import write_json
+    from riskmap.guard.evaluate import evaluate_checkpoint
+
+    result = evaluate_checkpoint(Path(args.checkpoint), Path(args.data), args.splits.split(","))
+    for split, m in result.items():
+        ap = "–" if m["ap"] is None else f"{m['ap']:.3f}"
+        auc = "–" if m["auc"] is None else f"{m['auc']:.3f}"
+        print(f"{split}: n={m['n']} ({m['positives']} positive) AP {ap} AUC {auc} "
+              f"accuracy {m['accuracy']:.3f} F1 {m['f1']:.3f}")
+    if args.out:
+        write_json(Path(args.out), {"checkpoint": args.checkpoint, "data": args.data, "splits": result})
+    return 0
+
+
 def add_parser(sub, positive_int) -> None:
     """The `guard` command group under the top-level `riskmap` parser."""
     p = sub.add_parser("guard", help="the neuro-symbolic guard: accident data, TGAT training")
@@ -65,3 +80,9 @@ def add_parser(sub, positive_int) -> None:
     q.add_argument("--resume", action="store_true")
     q.add_argument("--quiet", action="store_true")
     q.set_defaults(func=cmd_train)
+    q = guard_sub.add_parser("evaluate", help="score a TGAT checkpoint on splits of a guard dataset")
+    q.add_argument("--checkpoint", default="checkpoints/guard_tgat", help="checkpoint path without suffix")
+    q.add_argument("--data", required=True, help="guard dataset directory")
+    q.add_argument("--splits", default="seen,unseen", help="comma-separated split names")
+    q.add_argument("--out", default=None, help="write the metrics to this JSON file")
+    q.set_defaults(func=cmd_evaluate)

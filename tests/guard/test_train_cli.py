@@ -55,3 +55,31 @@ def test_missing_split_is_a_one_line_error(tmp_path, capsys):
 
     assert main(["guard", "train", "--data", str(tmp_path), "--out", str(tmp_path / "r"), "--quiet"]) == 2
     assert "riskmap guard collect" in capsys.readouterr().err
+
+
+def test_evaluate_scores_any_split_like_the_training_run(fake_data, tmp_path):
+    from sklearn.metrics import average_precision_score
+
+    from riskmap.cli import main
+    from riskmap.guard.dataset import load_split
+    from riskmap.guard.evaluate import evaluate_checkpoint
+    from riskmap.guard.predictor import AccidentPredictor
+    from riskmap.guard.train import _tensors, predict
+
+    run = tmp_path / "run"
+    assert main(["guard", "train", "--data", str(fake_data), "--out", str(run), "--epochs", "2", "--quiet"]) == 0
+    _fake_split(fake_data / "jobs" / "advhighway_x.npz", 45, 9)       # a split the training never saw
+    result = evaluate_checkpoint(run / "best", fake_data, ["seen", "advhighway"])
+    sidecar = json.loads((run / "best.json").read_text())
+    assert result["seen"]["ap"] == pytest.approx(sidecar["metrics"]["seen"]["ap"])
+    split = load_split(fake_data, "advhighway")
+    probs = predict(AccidentPredictor.load(run / "best").model, _tensors(split))
+    assert result["advhighway"]["n"] == 45 and result["advhighway"]["positives"] == 15
+    assert result["advhighway"]["ap"] == pytest.approx(average_precision_score(split["label"], probs))
+    assert result["advhighway"]["at_alert_threshold"]["threshold"] == 0.6
+    out = tmp_path / "eval.json"
+    assert main(["guard", "evaluate", "--checkpoint", str(run / "best"), "--data", str(fake_data),
+                 "--splits", "unseen,advhighway", "--out", str(out)]) == 0
+    assert set(json.loads(out.read_text())["splits"]) == {"unseen", "advhighway"}
+    assert main(["guard", "evaluate", "--checkpoint", str(run / "best"), "--data", str(fake_data),
+                 "--splits", "nosuch"]) == 2

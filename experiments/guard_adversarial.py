@@ -1,0 +1,197 @@
+"""The guard's closed-loop table on adversarial scenes (the paper's Tables 2–3 analogue).
+
+CRASH attacks (`adversary attack`) were generated against a planner; here the same generated
+trajectories of the same scenes are driven again (`adversary.crash.judge.rollout`) by the
+planner alone, with the deceleration plan always on at high speed (`guard-always:SPEC`) and with
+the TGAT-triggered plan (`guard:SPEC`). The adversary does not react to the guard: the
+trajectories were optimised against the unguarded planner, so the guarded rows are a transfer
+setting (the guard meets the attack that beat the planner, not an attack made against itself).
+
+Per record: collision with the adversary and with anyone (box IoU > 0.02, `judge`), the ego's
+progress over the attack horizon (path length t0 → t0 + 6 s; the rollout ignores contact, so
+every variant drives the whole horizon), and the guard's decision frames and interventions (BDI
+intervention ratio = interventions / decision frames, over the whole 8 s rollout).
+
+    python experiments/guard_adversarial.py --attacks out/att/highway/idm_distance \
+        --attacks out/att/intersection/idm_distance --count 60 --out out/guard_adv
+    python experiments/guard_adversarial.py --out out/guard_adv --table experiments/results/guard/adversarial/table
+
+Per record: OUT/<env>/<run>/<variant>/<scene>.json (atomic, resumable).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from adversary.crash.guard_data import read_attack_run
+from adversary.crash.judge import cached_planner, judge, rollout
+from adversary.crash.scenes import load_record
+from riskmap.atomic import write_json
+
+VARIANT_PREFIX = {"alone": "", "always": "guard-always:", "tgat": "guard:", "tgat-anyspeed": "guard:"}
+
+
+_GUARDED: dict = {}
+
+
+def anyspeed_guard(inner_spec: str, seed: int, checkpoint: str = ""):
+    """The TGAT-triggered guard whose plans act at any speed (speed threshold 0 m/s in every
+    family instead of 20 m/s highway / 5 m/s intersection): tests whether the threshold, rather
+    than System 1, keeps the guard from acting."""
+    from riskmap.guard.guarded import GUARD_CHECKPOINT, GuardConfig, GuardedHumanDriver, GuardedPlanner
+    from riskmap.guard.predictor import AccidentPredictor
+    from riskmap.guard.system2 import DecelerationAgent, System2Config
+    from riskmap.registry import HumanDriver, make_planner
+
+    families = GuardConfig().speed_threshold_mps
+    config = GuardConfig(trigger="tgat", speed_threshold_mps={family: 0.0 for family in families},
+                         default_speed_threshold_mps=0.0)
+    predictor = AccidentPredictor.load(checkpoint or GUARD_CHECKPOINT)
+    agent = DecelerationAgent(System2Config(decel_mps2=config.decel_mps2, control_hz=config.decision_hz))
+    inner = make_planner(inner_spec, seed=seed)
+    if isinstance(inner, HumanDriver):
+        return GuardedHumanDriver(predictor, agent, config)
+    return GuardedPlanner(inner, predictor, agent, config)
+
+
+def variant_planner(variant: str, inner_spec: str, seed: int):
+    """(planner, SPEC) of `variant`: alone, always, tgat, tgat@CKPT (the TGAT trigger with the
+    guard checkpoint CKPT, a path without suffix, instead of the shipped one), tgat-anyspeed or
+    tgat-anyspeed@CKPT (`anyspeed_guard`)."""
+    base, _, checkpoint = variant.partition("@")
+    spec = VARIANT_PREFIX[base] + inner_spec
+    if base == "tgat-anyspeed":
+        key = (variant, inner_spec, seed)
+        if key not in _GUARDED:
+            _GUARDED[key] = anyspeed_guard(inner_spec, seed, checkpoint)
+        return _GUARDED[key], f"{spec} (plans at any speed{', guard checkpoint ' + checkpoint if checkpoint else ''})"
+    if not checkpoint:
+        return cached_planner(spec, seed), spec
+    from riskmap.guard.guarded import make_guarded
+
+    key = (variant, inner_spec, seed)
+    if key not in _GUARDED:
+        _GUARDED[key] = make_guarded(base, inner_spec, seed=seed, checkpoint=checkpoint)
+    return _GUARDED[key], f"{spec} (guard checkpoint {checkpoint})"
+
+
+def cell_name(variant: str) -> str:
+    """The output folder of a variant: tgat@runs/guard/x/best -> tgat@x-best."""
+    base, _, checkpoint = variant.partition("@")
+    return f"{base}@{'-'.join(Path(checkpoint).parts[-2:])}" if checkpoint else base
+
+
+def drive_record(record, attack: dict, variant: str, seed: int) -> dict:
+    """One rollout of `attack`'s tracks with the attacked planner wrapped as `variant`."""
+    planner, spec = variant_planner(variant, attack["planner"], seed)
+    tracks = np.asarray(attack["tracks"], dtype=np.float64)
+    rows = attack["metrics"]["spliced_rows"]
+    result = rollout(record, tracks, rows, planner, spec)
+    metrics = judge(record, tracks, rows, int(attack["adversary_row"]), planner, spec, result=result)
+    k0, ego = result.t0_step, result.ego
+    path = result.states[ego, k0:][result.valid[ego, k0:], :2]
+    guard = getattr(planner, "guard", None)
+    out = {"spec": spec, "variant": variant, "collision": bool(metrics["collision"]),
+           "collision_time_s": metrics["collision_time_s"], "collision_any": bool(metrics["collision_any"]),
+           "collision_before_t0": bool(metrics["collision_before_t0"]),
+           "progress_m": float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum()),
+           "progress_to_collision_m": metrics["ego_progress_m"], "min_gap_m": metrics["min_gap_m"],
+           "rollout_s": result.wall_s}
+    if guard is not None:
+        summary = guard.summary()
+        out["guard"] = {k: summary[k] for k in ("frames", "interventions", "intervention_ratio", "single",
+                                                "sustained")}
+        # when System 2 took over (s of the episode) and the TGAT's highest score then
+        out["guard"]["interventions_s"] = [e["time_s"] for e in guard.log]
+        out["guard"]["max_scores"] = [e["max_score"] for e in guard.log]
+        out["guard"]["system1_ms_median"] = float(np.median(summary["system1_ms"])) if summary["system1_ms"] else None
+        out["guard"]["system2_ms_median"] = float(np.median(summary["system2_ms"])) if summary["system2_ms"] else None
+    return out
+
+
+def run(attack_dirs: list[Path], out: Path, variants: list[str], count: int) -> None:
+    for attack_dir in attack_dirs:
+        attack_run = read_attack_run(attack_dir)
+        for name in attack_run.names[:count]:
+            attack = json.loads((attack_run.path / "attacks" / f"{name}.json").read_text())
+            if attack.get("status") != "ok":
+                continue
+            record = None
+            for variant in variants:
+                path = out / attack["scene"]["env_id"] / attack_run.path.name / cell_name(variant) / f"{name}.json"
+                if path.exists():
+                    continue
+                record = record or load_record(attack_run.scenes / f"{name}.npz")
+                result = drive_record(record, attack, variant, attack_run.seed)
+                result.update({"scene": name, "attack_collision": bool(attack["collision"]),
+                               "attack_run": str(attack_run.path)})
+                write_json(path, result)
+                print(f"{attack_run.path.name} {name} {variant}: collision {result['collision']}", flush=True)
+
+
+def summarise(out: Path) -> list[dict]:
+    """One row per (env, attack run, variant) over the scenes that every variant of that run
+    finished, so that the variants are compared on the same scenes."""
+    rows = []
+    cells = sorted(p for p in out.glob("*/*/*") if p.is_dir())
+    common: dict = {}
+    for cell in cells:
+        names = {p.stem for p in cell.glob("scene_*.json")}
+        key = cell.parent
+        common[key] = names if key not in common else common[key] & names
+    for cell in cells:
+        env_id, run_name, variant = cell.relative_to(out).parts
+        records = [json.loads((cell / f"{name}.json").read_text()) for name in sorted(common[cell.parent])]
+        if not records:
+            continue
+        frames = sum(r["guard"]["frames"] for r in records if "guard" in r)
+        interventions = sum(r["guard"]["interventions"] for r in records if "guard" in r)
+        rows.append({
+            "env": env_id, "attack_run": run_name, "variant": variant, "scenes": len(records),
+            "collisions": sum(r["collision"] for r in records),
+            "collision_rate": float(np.mean([r["collision"] for r in records])),
+            "collisions_any": sum(r["collision_any"] for r in records),
+            "progress_m": float(np.mean([r["progress_m"] for r in records])),
+            "frames": frames, "interventions": interventions,
+            "intervention_ratio": interventions / frames if frames else None,
+        })
+    return rows
+
+
+def markdown(rows: list[dict]) -> str:
+    lines = [("| env | attack run | variant | scenes | collisions with adversary | rate | any collision | "
+              "progress (m, 6 s) | frames | interventions | BDI ratio |"), "|" + "---|" * 11]
+    for r in rows:
+        ratio = f"{r['intervention_ratio']:.3f}" if r["intervention_ratio"] is not None else "–"
+        lines.append(f"| {r['env']} | {r['attack_run']} | {r['variant']} | {r['scenes']} | {r['collisions']} | "
+                     f"{r['collision_rate']:.2f} | {r['collisions_any']} | {r['progress_m']:.1f} | "
+                     f"{r['frames'] or '–'} | {r['interventions'] or 0} | {ratio} |")
+    return "\n".join(lines) + "\n"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--attacks", type=Path, action="append", default=[],
+                        help="an `adversary attack --out` directory (repeat)")
+    parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument("--variants", default="alone,always,tgat")
+    parser.add_argument("--count", type=int, default=60, help="first COUNT attack records of each run")
+    parser.add_argument("--table", type=Path, default=None, help="write PREFIX.json and PREFIX.md")
+    args = parser.parse_args()
+    import torch
+
+    torch.set_num_threads(1)
+    run(args.attacks, args.out, args.variants.split(","), args.count)
+    rows = summarise(args.out)
+    if args.table is not None:
+        write_json(args.table.with_suffix(".json"), rows)
+        args.table.with_suffix(".md").write_text(markdown(rows))
+    print(markdown(rows))
+
+
+if __name__ == "__main__":
+    main()
