@@ -47,16 +47,21 @@ def read_sidecar(path: Path, kind: str = CHECKPOINT_KIND) -> dict:
     return data
 
 
-def load_model(path: Path, device: str = "cpu") -> tuple[RiskMapGenerator, dict]:
-    """The trained generator (eval mode) and its sidecar."""
-    data = read_sidecar(path)
-    model = RiskMapGenerator(ModelConfig(**data["model"]))
+def load_weights(model: torch.nn.Module, path: Path, fix: str) -> torch.nn.Module:
+    """Load `path`.safetensors into `model` (eval mode); a mismatch is an InputError ending in `fix`."""
     try:
         model.load_state_dict(load_file(str(Path(path).with_suffix(".safetensors"))))
     except (RuntimeError, OSError) as err:
-        raise InputError(f"checkpoint {path} does not match its model config ({err}); "
-                         "it was made by an incompatible version") from None
-    model.to(device).eval()
+        raise InputError(f"checkpoint {path} does not match its config ({err}); {fix}") from None
+    return model.eval()
+
+
+def load_model(path: Path, device: str = "cpu") -> tuple[RiskMapGenerator, dict]:
+    """The trained generator (eval mode) and its sidecar."""
+    data = read_sidecar(path)
+    model = load_weights(RiskMapGenerator(ModelConfig(**data["model"])), path,
+                         "it was made by an incompatible version")
+    model.to(device)
     RasterConfig.from_dict(data["raster"])  # validates
     return model, data
 

@@ -104,11 +104,7 @@ def attack_loss(model: TrafficModel, batch: Batch, enc: Encoded, z: torch.Tensor
                 config: GenerationConfig) -> tuple[torch.Tensor, torch.Tensor, dict]:
     """(loss [B], trajectories [B, N, F, 4], parts of scene 0) of the module docstring."""
     b, n = p.shape
-    fixed = torch.zeros(b, n, ego_future.shape[1], 4)
-    fixed[:, 0] = ego_future
-    fixed_mask = torch.zeros(b, n, dtype=torch.bool)
-    fixed_mask[:, 0] = True
-    traj = model.decode(batch, enc, z, fixed, fixed_mask)
+    traj = _decode_with_ego(model, batch, enc, z, ego_future)
     others = batch.agent_mask.clone()
     others[:, 0] = False
     sq = ((traj[..., :2] - ego_future[:, None, :, :2]) / config.position_scale_m).pow(2).sum(-1).sum(-1)  # [B, N]

@@ -32,7 +32,7 @@ from adversary.crash.selection import SelectionModule, candidates, distance_weig
 from adversary.crash.train_traffic import load_traffic_model, load_windows, scene_collides
 from rasterize.errors import InputError
 from riskmap.atomic import write_json
-from riskmap.checkpoint import read_sidecar, save_checkpoint
+from riskmap.checkpoint import load_weights, read_sidecar, save_checkpoint
 
 CHECKPOINT_KIND = "crash_selector"
 
@@ -201,14 +201,7 @@ def _baseline_picks(model, val: list, rng: np.random.Generator) -> dict:
 
 
 def load_selector(path: Path) -> tuple[SelectionModule, dict]:
-    from safetensors.torch import load_file
-
     data = read_sidecar(path, kind=CHECKPOINT_KIND)
-    selector = SelectionModule(data["hidden"])
-    try:
-        selector.load_state_dict(load_file(str(Path(path).with_suffix(".safetensors"))))
-    except (RuntimeError, OSError) as err:
-        raise InputError(f"selector {path} does not match its config ({err}); train it again with "
-                         "`adversary train-selector`") from None
-    selector.eval()
+    selector = load_weights(SelectionModule(data["hidden"]), path,
+                            "train it again with `adversary train-selector`")
     return selector, data

@@ -32,7 +32,7 @@ from rasterize.errors import InputError
 from rasterize.frames import box_corners
 from rasterize.geometry import boxes_overlap
 from riskmap.atomic import write_json
-from riskmap.checkpoint import read_sidecar, save_checkpoint
+from riskmap.checkpoint import load_weights, read_sidecar, save_checkpoint
 
 CHECKPOINT_KIND = "traffic_cvae"
 
@@ -197,17 +197,10 @@ def evaluate_model(model: TrafficModel, items: list[SceneTensors], samples: int 
 
 
 def load_traffic_model(path: Path) -> tuple[TrafficModel, FeatureConfig, dict]:
-    from safetensors.torch import load_file
-
     data = read_sidecar(path, kind=CHECKPOINT_KIND)
     features = FeatureConfig(**data["features"])
-    model = TrafficModel(TrafficModelConfig(**data["model"]), features.lane_chunks, features.chunk_points)
-    try:
-        model.load_state_dict(load_file(str(Path(path).with_suffix(".safetensors"))))
-    except (RuntimeError, OSError) as err:
-        raise InputError(f"traffic model {path} does not match its config ({err}); train it again "
-                         "with `adversary train-traffic`") from None
-    model.eval()
+    model = load_weights(TrafficModel(TrafficModelConfig(**data["model"]), features.lane_chunks,
+                                      features.chunk_points), path, "train it again with `adversary train-traffic`")
     return model, features, data
 
 
