@@ -1,42 +1,28 @@
-"""The `adversary` command line: stress-test campaigns, their reports, and scenario search.
+"""The `adversary` command line: stress-test campaigns, their reports, scenario search and CRASH.
 
-Each subcommand lives in its own module (`cmd_*.py`) with `add_parser(subparsers)`, which sets
-`handler`; this file only lists them.
+Each capability's folder owns its subcommands (`*/cli.py`, `add_parsers(subparsers)`); this file
+only lists them.
 """
 
 from __future__ import annotations
 
 import argparse
-import sys
 
-from rasterize.errors import InputError
+from riskmap.infra.cli import run_command
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from adversary import cmd_crash, cmd_guard_data, cmd_report, cmd_search, cmd_stress_test
+    from adversary.campaign import cli as campaign_cli
+    from adversary.crash import cli as crash_cli
+    from adversary.report import cli as report_cli
+    from adversary.search import cli as search_cli
 
     parser = argparse.ArgumentParser(prog="adversary", description=__doc__.splitlines()[0])
     subparsers = parser.add_subparsers(dest="command", required=True)
-    cmd_stress_test.add_parser(subparsers)
-    cmd_report.add_parser(subparsers)
-    cmd_search.add_parsers(subparsers)
-    cmd_crash.add_parsers(subparsers)
-    cmd_guard_data.add_parser(subparsers)
+    for module in (campaign_cli, report_cli, search_cli, crash_cli):
+        module.add_parsers(subparsers)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    try:
-        return args.handler(args)
-    except InputError as error:
-        print(f"adversary {args.command}: error: {error}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print(f"adversary {args.command}: interrupted; finished work is kept, rerun with --resume",
-              file=sys.stderr)
-        return 130
-
-
-if __name__ == "__main__":
-    sys.exit(main())
+    return run_command("adversary", build_parser(), argv)

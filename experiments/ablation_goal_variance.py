@@ -26,9 +26,9 @@ from pathlib import Path
 import numpy as np
 
 from rasterize.frames import ego_from_grid, ego_from_world, ego_pose
-from riskmap.atomic import write_json
-from riskmap.data import DemoDataset
-from riskmap.planner import RiskMapPlanner
+from riskmap.data.dataset import DemoDataset
+from riskmap.infra.atomic import write_json
+from riskmap.planner.riskmap_planner import RiskMapPlanner
 
 VARIANCES = (2.0, 5.0)               # cells²
 CLASSES = (("straight", 0.0, 10.0), ("slow turn", 10.0, 45.0), ("large turn", 45.0, 360.0))
@@ -62,7 +62,7 @@ def example_png(scene, planner: RiskMapPlanner, plans: dict, path: Path, title: 
     import matplotlib.pyplot as plt
 
     from rasterize.raster import rasterize_scene
-    from riskmap.figures import raster_to_rgb
+    from riskmap.figures.panels import raster_to_rgb
 
     ext = planner.raster.extent
     origin, heading = ego_pose(scene)

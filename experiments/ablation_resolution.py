@@ -26,9 +26,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from eval_plans import window_errors
 
-from riskmap.atomic import write_json
-from riskmap.data import DemoDataset
-from riskmap.planner import RiskMapPlanner
+from riskmap.data.dataset import DemoDataset
+from riskmap.infra.atomic import write_json
+from riskmap.planner.riskmap_planner import RiskMapPlanner
 
 RUNS = {25: "runs/highway_r25", 50: "runs/highway_v1", 75: "runs/highway_r75", 100: "runs/highway_r100"}
 

@@ -24,9 +24,9 @@ import numpy as np
 
 from rasterize.frames import ego_from_world, ego_pose
 from rasterize.maps import uncertainty_map
-from riskmap.atomic import write_json
-from riskmap.data import DemoDataset
-from riskmap.planner import RiskMapPlanner
+from riskmap.data.dataset import DemoDataset
+from riskmap.infra.atomic import write_json
+from riskmap.planner.riskmap_planner import RiskMapPlanner
 
 SHAPES = {"0.5/0.5": "runs/highway_v10_s05_05", "0.5/1.5": "runs/highway_v10",
           "2/2": "runs/highway_v10_s2_2"}

@@ -25,8 +25,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from eval_plans import evaluate
 
-from riskmap.atomic import write_json
-from riskmap.drive import DriveConfig, drive
+from riskmap.evaluation.drive import drive
+from riskmap.infra.atomic import write_json
+from riskmap.sim.rollout import DriveConfig
 
 
 def main() -> None:

@@ -1,6 +1,6 @@
 """Value iteration, state visitation and sampler of this tree against an earlier commit's, in one process.
 
-Loads `riskmap/vi.py` and `riskmap/sampler.py` as they were at `--commit` (git show) next to the
+Loads `riskmap/planner/vi.py` and `riskmap/planner/sampler.py` as they were at `--commit` (git show) next to the
 current ones, checks that both give bitwise-equal results on the same inputs, and times them
 interleaved, so that the ratio holds on a busy machine where absolute times do not.
 Medians over `--repeats`; policies come from the shipped highway checkpoint on held-out windows.
@@ -24,11 +24,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
-import riskmap.sampler as sampler_now
-import riskmap.vi as vi_now
+import riskmap.planner.sampler as sampler_now
+import riskmap.planner.vi as vi_now
 from rasterize.maps import start_cell
-from riskmap.data import DemoDataset
-from riskmap.planner import RiskMapPlanner
+from riskmap.data.dataset import DemoDataset
+from riskmap.planner.riskmap_planner import RiskMapPlanner
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -75,8 +75,8 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     with tempfile.TemporaryDirectory() as tmp:
-        vi_then = module_at(args.commit, "riskmap/vi.py", "vi_then", Path(tmp))
-        sampler_then = module_at(args.commit, "riskmap/sampler.py", "sampler_then", Path(tmp))
+        vi_then = module_at(args.commit, "riskmap/planner/vi.py", "vi_then", Path(tmp))
+        sampler_then = module_at(args.commit, "riskmap/planner/sampler.py", "sampler_then", Path(tmp))
     rows = []
     for g in (50, 100):
         horizon = round(1.6 * g)

@@ -19,7 +19,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from riskmap.collect import CollectConfig, collect
+from riskmap.data.collect import CollectConfig, collect
 
 
 @dataclass(frozen=True)

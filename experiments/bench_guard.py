@@ -17,14 +17,14 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from riskmap.atomic import write_json
-from riskmap.drive import DriveConfig, drive_episode
-from riskmap.episode import make_env
 from riskmap.guard.events import nearest_neighbours
 from riskmap.guard.guarded import GUARD_CHECKPOINT, GuardConfig, obstacle_ahead
 from riskmap.guard.predictor import AccidentPredictor
 from riskmap.guard.system2 import DecelerationAgent, System2Config
-from riskmap.registry import HumanDriver
+from riskmap.infra.atomic import write_json
+from riskmap.sim.episode import make_env
+from riskmap.sim.plan import HumanDriver
+from riskmap.sim.rollout import DriveConfig, drive_episode
 
 
 class _SceneTap(HumanDriver):

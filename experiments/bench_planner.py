@@ -23,10 +23,10 @@ import numpy as np
 import torch
 
 from rasterize.config import raster_config_for_env
-from riskmap.episode import Episode, make_env
-from riskmap.model import ModelConfig, RiskMapGenerator
-from riskmap.planner import RiskMapPlanner
-from riskmap.vi import soft_value_iteration
+from riskmap.planner.model import ModelConfig, RiskMapGenerator
+from riskmap.planner.riskmap_planner import RiskMapPlanner
+from riskmap.planner.vi import soft_value_iteration
+from riskmap.sim.episode import Episode, make_env
 
 STAGES = ("raster", "network", "vi", "svf", "sampler", "total")
 

@@ -5,7 +5,7 @@
 Chromium (Debian: `apt-get install -y chromium`) loads a copy of the page with a small script
 appended that, once everything has loaded, writes each <img>'s naturalWidth and each <table>'s
 row count into the DOM; `--dump-dom` returns it. A second run takes a screenshot. The static
-check (files exist and decode, tables have rows: adversary.report_check) runs first and also
+check (files exist and decode, tables have rows: adversary.report.check) runs first and also
 without a browser (`--no-browser`). Exit status 0 only when no check failed.
 """
 
@@ -19,7 +19,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from adversary.report_check import report_problems
+from adversary.report.check import report_problems
 
 _PROBE = """
 <script>

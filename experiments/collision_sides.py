@@ -15,12 +15,12 @@ from pathlib import Path
 import numpy as np
 
 from rasterize.frames import ego_from_world, heading_angle
-from riskmap.evaluate import EvalConfig, _env, _planner
-from riskmap.log_replay import HumanLog, LogReplayEpisode
+from riskmap.evaluation.evaluate import EvalConfig, _env, _planner
+from riskmap.sim.log_replay import HumanLog, LogReplayEpisode
 
 
 def collision_side(out: Path, spec: str, episode: int) -> dict:
-    from riskmap.drive import DriveConfig, drive_episode
+    from riskmap.sim.rollout import DriveConfig, drive_episode
 
     meta = json.loads((out / "run.json").read_text())["config"]
     config = EvalConfig(meta["env_id"], (spec,), meta["episodes"], meta["seed"], meta["mode"],

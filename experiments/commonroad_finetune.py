@@ -3,7 +3,7 @@
 Data: windows cut from CommonRoad recordings (`riskmap collect --from-commonroad`), one shard per
 recorded demonstrator. Held out by vehicle, k-fold: demonstrators are dealt round-robin (in
 dataset order) into `folds` folds; for each fold a copy of the checkpoint is fine-tuned on the
-windows of the other folds' vehicles (MaxEnt IRL step of `riskmap.irl`, the loss and
+windows of the other folds' vehicles (MaxEnt IRL step of `riskmap.planner.irl`, the loss and
 augmentation `riskmap train` uses) and evaluated on the fold's own vehicles. Every window is thus
 scored once by a model that never trained on its demonstrator (the other vehicles of the same
 recording may appear around it in the raster: held out by vehicle, not by scene).
@@ -12,7 +12,7 @@ Metrics (experiments/eval_plans.window_errors), averaged over `plan_seeds` sampl
 ADE / FDE of the 12 plan waypoints against the recorded human's 6 s future, and the goal error
 (plan end to the centre of the goal cell the planner was given).
 
-    .venv/bin/python -m riskmap.cli collect --from-commonroad tests/fixtures/commonroad --out data/commonroad
+    .venv/bin/python -m riskmap collect --from-commonroad tests/fixtures/commonroad --out data/commonroad
     .venv/bin/python experiments/commonroad_finetune.py --data data/commonroad
 """
 
@@ -31,12 +31,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from eval_plans import window_errors
 
 from rasterize.frames import ego_from_world, ego_pose
-from riskmap.atomic import write_json
-from riskmap.baselines import ConstantVelocityPlanner
-from riskmap.checkpoint import load_model, save_checkpoint
-from riskmap.data import DemoDataset, PerturbedEgo
-from riskmap.irl import IRLConfig, irl_step
-from riskmap.planner import RiskMapPlanner
+from riskmap.data.dataset import DemoDataset, PerturbedEgo
+from riskmap.infra.atomic import write_json
+from riskmap.infra.checkpoint import save_checkpoint
+from riskmap.planner.baselines import ConstantVelocityPlanner
+from riskmap.planner.irl import IRLConfig, irl_step
+from riskmap.planner.model import load_model
+from riskmap.planner.riskmap_planner import RiskMapPlanner
 
 
 @dataclass(frozen=True)

@@ -16,7 +16,7 @@ from adversary.crash.batch import collate
 from adversary.crash.features import scene_tensors
 from adversary.crash.scenes import load_record
 from adversary.crash.selection import candidates
-from riskmap.atomic import write_json
+from riskmap.infra.atomic import write_json
 
 ROOT = Path(__file__).resolve().parents[1]
 

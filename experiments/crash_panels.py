@@ -17,10 +17,11 @@ from pathlib import Path
 import numpy as np
 
 from adversary.crash.features import scene_tensors
-from adversary.crash.judge import cached_planner, judge, rollout
+from adversary.crash.judge import judge, rollout
 from adversary.crash.panel import save_attack_panel
 from adversary.crash.scenes import load_record
 from adversary.crash.train_traffic import load_traffic_model
+from riskmap.registry import cached_planner
 
 
 def main() -> None:

@@ -24,7 +24,7 @@ from pathlib import Path
 
 from adversary.crash.attack import AttackConfig
 from adversary.crash.run import TABLE_HEADER, run_attacks, summarise, table_row
-from riskmap.atomic import atomic_write, write_json
+from riskmap.infra.atomic import atomic_write, write_json
 
 ROOT = Path(__file__).resolve().parents[1]
 PLANNERS = {"replay": "replay", "idm": "idm", "riskmap": "riskmap:checkpoints/riskmap_{family}"}

@@ -21,8 +21,8 @@ import numpy as np
 
 from rasterize.frames import ego_from_grid, ego_from_world, ego_pose
 from rasterize.maps import uncertainty_map
-from riskmap.data import DemoDataset
-from riskmap.planner import RiskMapPlanner
+from riskmap.data.dataset import DemoDataset
+from riskmap.planner.riskmap_planner import RiskMapPlanner
 
 
 def window_errors(planner: RiskMapPlanner, dataset: DemoDataset, indices, sigma_x: float,

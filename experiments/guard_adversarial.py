@@ -28,9 +28,10 @@ from pathlib import Path
 import numpy as np
 
 from adversary.crash.guard_data import read_attack_run
-from adversary.crash.judge import cached_planner, judge, rollout
+from adversary.crash.judge import judge, rollout
 from adversary.crash.scenes import load_record
-from riskmap.atomic import write_json
+from riskmap.infra.atomic import write_json
+from riskmap.registry import cached_planner
 
 VARIANT_PREFIX = {"alone": "", "always": "guard-always:", "tgat": "guard:", "tgat-anyspeed": "guard:"}
 
@@ -45,7 +46,8 @@ def anyspeed_guard(inner_spec: str, seed: int, checkpoint: str = ""):
     from riskmap.guard.guarded import GUARD_CHECKPOINT, GuardConfig, GuardedHumanDriver, GuardedPlanner
     from riskmap.guard.predictor import AccidentPredictor
     from riskmap.guard.system2 import DecelerationAgent, System2Config
-    from riskmap.registry import HumanDriver, make_planner
+    from riskmap.registry import make_planner
+    from riskmap.sim.plan import HumanDriver
 
     families = GuardConfig().speed_threshold_mps
     config = GuardConfig(trigger="tgat", speed_threshold_mps={family: 0.0 for family in families},

@@ -22,11 +22,11 @@ from pathlib import Path
 
 import numpy as np
 
-from riskmap.atomic import write_json
-from riskmap.drive import DriveConfig, DriveHooks, drive_episode
-from riskmap.episode import make_env
 from riskmap.guard.aggressors import AggressorHook
+from riskmap.infra.atomic import write_json
 from riskmap.registry import make_planner
+from riskmap.sim.episode import make_env
+from riskmap.sim.rollout import DriveConfig, DriveHooks, drive_episode
 
 INNER = {"idm": {"highway-v0": "idm", "intersection-v0": "idm"},
          "riskmap": {"highway-v0": "riskmap:checkpoints/riskmap_highway",

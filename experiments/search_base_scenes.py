@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import sys
 
-from adversary.evaluate import EvaluationConfig, evaluate
-from adversary.templates import TEMPLATES
+from adversary.search.evaluation import EvaluationConfig, evaluate
+from adversary.search.scenarios import TEMPLATES
 
 
 def main(planners: list[str]) -> None:

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from riskmap.atomic import write_json
+from riskmap.infra.atomic import write_json
 
 KEPT = ("collisions_per_generation.png", "best_failure_evolution.png", "pareto_front.png")
 

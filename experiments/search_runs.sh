@@ -11,7 +11,7 @@ case $name in
 esac
 for template in lead_brakes cut_in; do
   for algorithm in nsga2 random; do
-    python -m adversary.cli search --planner "$spec" --template "$template" --algorithm "$algorithm" \
+    python -m adversary search --planner "$spec" --template "$template" --algorithm "$algorithm" \
       --pop "$pop" --gen "$gen" --seed 0 --workers "$workers" --quiet --resume \
       --out "$root/${name}_${template}_${algorithm}"
   done

@@ -1,7 +1,7 @@
 """Choose a checkpoint's planning-time goal variance on held-out windows and record it in its sidecar.
 
 The goal enters value iteration as −d²/(2σ²) (cells) against per-cell rewards of about −1 to −2,
-so the trained σ² = 5 lets plans stop ~8 cells short of the goal (riskmap/planner.py,
+so the trained σ² = 5 lets plans stop ~8 cells short of the goal (riskmap/planner/riskmap_planner.py,
 `RiskMapPlanner.load`). This script plans every candidate σ² on the same held-out windows and
 writes the one with the lowest mean ADE against the recorded future into the sidecar's
 `planning` section, with the evidence, so that `riskmap:PATH` plans with it from then on.
@@ -21,7 +21,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from eval_plans import evaluate
 
-from riskmap.atomic import write_json
+from riskmap.infra.atomic import write_json
 
 
 def main() -> None:

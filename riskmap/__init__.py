@@ -2,9 +2,9 @@
 training, sampler, planner and closed-loop driving. Heavy modules (torch) load on first use."""
 
 _LAZY = {
-    "RiskMapPlanner": "riskmap.planner", "Plan": "riskmap.planner", "Planner": "riskmap.planner",
-    "DemoDataset": "riskmap.data", "make_planner": "riskmap.registry",
-    "soft_value_iteration": "riskmap.vi", "state_visitation": "riskmap.vi",
+    "RiskMapPlanner": "riskmap.planner.riskmap_planner", "Plan": "riskmap.planner.riskmap_planner", "Planner": "riskmap.planner.riskmap_planner",
+    "DemoDataset": "riskmap.data.dataset", "make_planner": "riskmap.registry",
+    "soft_value_iteration": "riskmap.planner.vi", "state_visitation": "riskmap.planner.vi",
 }
 
 __all__ = sorted(_LAZY)

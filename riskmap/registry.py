@@ -1,5 +1,7 @@
 """One parser for planner SPEC strings (DESIGN §2).
 
+Built in:
+
     idm              the IDM/MOBIL "human": the ego drives itself, no plan is made
     cv               constant velocity: current speed and heading for 6 s
     riskmap:PATH     the risk-map planner from a checkpoint (PATH with or without .safetensors)
@@ -8,20 +10,21 @@
     replay           log playback of the human's recorded trajectory (needs a recorded episode)
     cnn:PATH, cnn_lstm:PATH (or cnn-lstm:PATH), rvsg:PATH
                      behaviour-cloning baselines from `riskmap train-baseline` checkpoints
+
+Plug-ins: any other `NAME:ARG` is looked up in the entry-point group `riskmap.planners`, whose
+entry `NAME` is a factory `factory(ARG, seed=...)` returning a planner. The guard is one
+(`guard`, `guarded`, `guard-always`, declared in pyproject.toml): it wraps a planner made by this
+registry, so it sits above it and the registry never imports it.
 """
 
 from __future__ import annotations
 
 from rasterize.errors import InputError
+from riskmap.sim.plan import HumanDriver
 
+PLUGIN_GROUP = "riskmap.planners"
 SPECS = ("idm", "cv", "replay", "riskmap:PATH", "cnn:PATH", "cnn_lstm:PATH", "rvsg:PATH",
          "guard:SPEC", "guard-always:SPEC")
-
-
-class HumanDriver:
-    """Marker for `idm`: the simulator's IDM/MOBIL ego keeps driving itself."""
-
-    name = "idm"
 
 
 def make_planner(spec: str, seed: int = 0, goal_variance: float | None = None):
@@ -31,23 +34,46 @@ def make_planner(spec: str, seed: int = 0, goal_variance: float | None = None):
     if kind == "idm" and not arg:
         return HumanDriver()
     if kind == "cv" and not arg:
-        from riskmap.baselines import ConstantVelocityPlanner
+        from riskmap.planner.baselines import ConstantVelocityPlanner
 
         return ConstantVelocityPlanner()
     if kind == "riskmap" and arg:
-        from riskmap.planner import RiskMapPlanner
+        from riskmap.planner.riskmap_planner import RiskMapPlanner
 
         return RiskMapPlanner.load(arg, seed=seed, goal_variance=goal_variance)
-    if kind in ("guard", "guarded", "guard-always") and arg:
-        from riskmap.guard.guarded import make_guarded
-
-        return make_guarded("always" if kind == "guard-always" else "tgat", arg, seed=seed)
     if kind == "replay" and not arg:
-        from riskmap.log_replay import ReplayPlanner
+        from riskmap.sim.log_replay import ReplayPlanner
 
         return ReplayPlanner()
     if kind in ("cnn", "cnn_lstm", "cnn-lstm", "rvsg") and arg:
-        from riskmap.bc import BCPlanner
+        from riskmap.planner.bc import BCPlanner
 
         return BCPlanner.load(arg, expected_kind=kind)
+    factory = _plugin(kind) if arg else None
+    if factory is not None:
+        return factory(arg, seed=seed)
     raise InputError(f"unknown planner spec {spec!r}; use one of {', '.join(SPECS)}")
+
+
+def _plugin(name: str):
+    """The factory of entry point `name` in group `riskmap.planners`, or None."""
+    from importlib.metadata import entry_points
+
+    for entry in entry_points(group=PLUGIN_GROUP, name=name):
+        try:
+            return entry.load()
+        except ImportError as err:
+            raise InputError(f"planner plug-in {name!r} ({entry.value}) cannot be imported ({err}); "
+                             "install what it needs") from None
+    return None
+
+
+_CACHED: dict = {}
+
+
+def cached_planner(spec: str, seed: int = 0):
+    """`make_planner(spec, seed)`, made once per process: loading a checkpoint costs seconds, and
+    a planner is reset at the start of every episode, so reuse does not change results."""
+    if (spec, seed) not in _CACHED:
+        _CACHED[spec, seed] = make_planner(spec, seed=seed)
+    return _CACHED[spec, seed]

@@ -40,9 +40,9 @@ import numpy as np
 
 from rasterize.errors import InputError
 from rasterize.scene import AgentKind
-from riskmap.atomic import write_json, write_npz
 from riskmap.guard.dataset import GuardCollectConfig, extract_windows, split_counts
-from riskmap.provenance import provenance
+from riskmap.infra.atomic import write_json, write_npz
+from riskmap.infra.provenance import provenance
 
 SPLIT_CHARS = set("abcdefghijklmnopqrstuvwxyz0123456789")
 CUTS = ("contact", "judge")
@@ -173,8 +173,8 @@ def export(attack_dirs: list[Path], out: Path, config: GuardDataConfig = GuardDa
     """Windows of every attack record under `attack_dirs` into `out` (module docstring)."""
     from tqdm import tqdm
 
-    from adversary.crash.judge import cached_planner
     from adversary.crash.scenes import load_record
+    from riskmap.registry import cached_planner
 
     runs = [read_attack_run(Path(d)) for d in attack_dirs]
     jobs_dir = Path(out) / "jobs"

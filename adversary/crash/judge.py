@@ -20,12 +20,14 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.interpolate import CubicHermiteSpline
 
-from adversary.crash.scenes import WINDOW_DT_S, SceneRecord, cached_env
-from adversary.solution import ego_only_solution
+from adversary.crash.scenes import WINDOW_DT_S, SceneRecord
+from adversary.crash.solution import ego_only_solution
 from rasterize.errors import InputError
 from rasterize.frames import box_corners
 from rasterize.geometry import box_gap
-from riskmap.log_replay import HumanLog
+from riskmap.registry import cached_planner
+from riskmap.sim.episode import cached_env
+from riskmap.sim.log_replay import HumanLog
 
 COLLISION_IOU = 0.02            # STRIVE: a collision is a box IoU above this
 OFF_ROAD_FRACTION = 0.05        # STRIVE: off-road when more than this share of the box is off
@@ -125,19 +127,6 @@ class Rollout:
         return np.array([self.recorder_id(int(a)) for a in record.agent_ids], dtype=np.int64)
 
 
-_PLANNERS: dict = {}
-
-
-def cached_planner(spec: str, seed: int = 0):
-    """One planner per SPEC and process (loading a checkpoint costs seconds; planners are reset
-    per episode, so reuse does not change results)."""
-    from riskmap.registry import make_planner
-
-    if (spec, seed) not in _PLANNERS:
-        _PLANNERS[spec, seed] = make_planner(spec, seed=seed)
-    return _PLANNERS[spec, seed]
-
-
 def _no_contact_response(run) -> None:
     # highway-env would push the ego out of any box it touches and stop the episode; STRIVE
     # judges overlap, so the ego passes through and the boxes are measured.
@@ -163,8 +152,8 @@ def rollout(record: SceneRecord, tracks: np.ndarray, rows, planner, planner_spec
             control_hz: int = 10, replan_hz: int = 2) -> Rollout:
     """Drive `planner` (made from `planner_spec`) against the log spliced with `tracks` at `rows`
     (module docstring). Empty `rows` (tracks [0, F, 6]) drives against the untouched record."""
-    from riskmap.drive import DriveConfig, DriveHooks, drive_episode
-    from riskmap.log_replay import LogReplayEpisode, ReplayPlanner
+    from riskmap.sim.log_replay import LogReplayEpisode, ReplayPlanner
+    from riskmap.sim.rollout import DriveConfig, DriveHooks, drive_episode
 
     started = time.perf_counter()
     scene = record.scene
@@ -381,7 +370,7 @@ def judge(record: SceneRecord, tracks: np.ndarray, rows, adversary_row: int, pla
     ego_min_accel_mps2 / ego_max_abs_accel_mps2: see `_ego_accelerations`, over the 2 s before
       the collision (before the end of the rollout without one).
     collision_type: `classify_collision` over the 3 s before the collision (None without one).
-    solution_found: STRIVE's solution check (`adversary.solution.ego_only_solution` on the
+    solution_found: STRIVE's solution check (`adversary.crash.solution.ego_only_solution` on the
       rollout: could the ego alone, from 3 s before, have avoided every box): along its own path
       with constant accelerations (solution_found_longitudinal), or moving one lane width left or
       right within 2 s while staying on the road; None without a collision.
@@ -494,16 +483,3 @@ def handover_offsets(env_id: str, seed: int, episodes: int, specs: tuple[str, ..
         out[spec] = {"seconds_per_rollout_mean": float(np.mean(seconds)),
                      "t0_offset_m_mean": float(np.mean(offsets)), "t0_offset_m_max": float(np.max(offsets))}
     return out
-
-
-if __name__ == "__main__":
-    import argparse
-    import json
-
-    parser = argparse.ArgumentParser(description="Rollout speed and the ego's offset from its log at t0.")
-    parser.add_argument("--env", default="highway-v0")
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--episodes", type=int, default=10)
-    parser.add_argument("--planners", nargs="+", default=["replay", "idm", "riskmap:checkpoints/riskmap_highway"])
-    args = parser.parse_args()
-    print(json.dumps(handover_offsets(args.env, args.seed, args.episodes, tuple(args.planners)), indent=1))

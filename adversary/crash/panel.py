@@ -15,7 +15,7 @@ import numpy as np
 from adversary.crash.judge import Rollout, splice_tracks
 from adversary.crash.scenes import SceneRecord
 from rasterize.frames import box_corners
-from riskmap.atomic import atomic_write
+from riskmap.infra.atomic import atomic_write
 
 _GREY, _BLUE, _RED, _GREEN = "0.55", "tab:blue", "tab:red", "tab:green"
 
@@ -116,8 +116,9 @@ def example_panels(out_dir: Path) -> list[dict]:
     ahead in the ego's lane brakes hard in front of the human's log played back (episode 9), and
     a car two lanes over cuts into the ego's lane and brakes in front of the risk-map planner
     (episode 0)."""
-    from adversary.crash.judge import braking_track, cached_planner, judge, rollout
+    from adversary.crash.judge import braking_track, judge, rollout
     from adversary.crash.scenes import AttackScene, record_attack_scene
+    from riskmap.registry import cached_planner
 
     cases = [("brake_ahead_replay", AttackScene("highway-v0", 0, 9), 3, False, "replay"),
              ("cut_in_riskmap", AttackScene("highway-v0", 0, 0), 1, True,
@@ -133,13 +134,3 @@ def example_panels(out_dir: Path) -> list[dict]:
         save_attack_panel(record, tracks, [row], row, result, metrics, Path(out_dir) / f"{name}.png", title)
         results.append({"name": name, **metrics})
     return results
-
-
-if __name__ == "__main__":
-    import argparse
-    import json
-
-    parser = argparse.ArgumentParser(description="Draw the example attack panels.")
-    parser.add_argument("--out", default="experiments/results/crash_panels_examples")
-    args = parser.parse_args()
-    print(json.dumps(example_panels(Path(args.out)), indent=1))

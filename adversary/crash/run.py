@@ -23,8 +23,8 @@ import numpy as np
 
 from adversary.crash.attack import AttackConfig, attack_records, load_models
 from rasterize.errors import InputError
-from riskmap.atomic import atomic_write, write_json
-from riskmap.provenance import provenance
+from riskmap.infra.atomic import atomic_write, write_json
+from riskmap.infra.provenance import provenance
 
 INDEX = "index.json"
 
@@ -81,8 +81,8 @@ def _attack_batch(paths: list[str], planner_spec: str, config: AttackConfig, see
     """Worker entry: a batch of scenes, never raises (an error becomes every scene's record)."""
     import torch
 
-    from adversary.crash.judge import cached_planner
     from adversary.crash.scenes import load_record
+    from riskmap.registry import cached_planner
 
     torch.set_num_threads(1)
     started = time.perf_counter()

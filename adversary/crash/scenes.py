@@ -2,7 +2,7 @@
 
 An `AttackScene` names episode `episode` of `riskmap drive --seed scene_seed` on `env_id`,
 attacked at `t0_s`. `record_attack_scene` drives the IDM/MOBIL human ego on it for
-t0 + horizon seconds (`riskmap.log_replay.record_human_episode`, 10 Hz) and cuts the window the
+t0 + horizon seconds (`riskmap.sim.log_replay.record_human_episode`, 10 Hz) and cuts the window the
 traffic model sees: 2 s of history and `horizon_s` of logged future at 2 Hz (4 + 1 + 12 = 17
 steps for the defaults, current index 4), the ego in row 0 and then the others within `radius_m`
 nearest first, at most `max_agents` rows, with the lanes around the ego, exactly as
@@ -20,24 +20,12 @@ import numpy as np
 from rasterize.config import family_of_env
 from rasterize.errors import InputError
 from rasterize.scene import Lane, LineType, Scene
-from riskmap.atomic import write_json, write_npz
-from riskmap.log_replay import HumanLog
+from riskmap.infra.atomic import write_json, write_npz
+from riskmap.sim.episode import cached_env
+from riskmap.sim.log_replay import HumanLog
 
 WINDOW_DT_S = 0.5          # the traffic model's step (2 Hz)
 HISTORY_S = 2.0            # past the window shows (4 steps before the current one)
-
-_ENVS: dict = {}
-
-
-def cached_env(env_id: str, control_hz: int = 10):
-    """One highway-env env per (env, rate) and process: making one costs about a second, and
-    every episode resets it with its own seed, so reuse does not change results."""
-    from riskmap.episode import make_env
-
-    if (env_id, control_hz) not in _ENVS:
-        _ENVS[env_id, control_hz] = make_env(env_id, control_hz)
-    return _ENVS[env_id, control_hz]
-
 
 @dataclass(frozen=True)
 class AttackScene:
@@ -119,8 +107,8 @@ def record_attack_scene(scene: AttackScene, control_hz: int = 10, radius_m: floa
     road before t0 + horizon, or no other vehicle is within `radius_m` of the ego at t0 (callers
     that sweep episodes skip those).
     """
-    from riskmap.episode import Episode
-    from riskmap.log_replay import log_of
+    from riskmap.sim.episode import Episode
+    from riskmap.sim.log_replay import log_of
 
     scene.check(control_hz)
     if max_agents < 2 or radius_m <= 0:

@@ -31,8 +31,8 @@ from adversary.crash.generate import GenerationConfig, attack_loss, generate, lo
 from adversary.crash.selection import SelectionModule, candidates, distance_weights
 from adversary.crash.train_traffic import load_traffic_model, load_windows, scene_collides
 from rasterize.errors import InputError
-from riskmap.atomic import write_json
-from riskmap.checkpoint import load_weights, read_sidecar, save_checkpoint
+from riskmap.infra.atomic import write_json
+from riskmap.infra.checkpoint import load_weights, read_sidecar, save_checkpoint
 
 CHECKPOINT_KIND = "crash_selector"
 

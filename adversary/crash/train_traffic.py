@@ -31,8 +31,8 @@ from adversary.crash.traffic_model import TrafficModel, TrafficModelConfig, kl_n
 from rasterize.errors import InputError
 from rasterize.frames import box_corners
 from rasterize.geometry import boxes_overlap
-from riskmap.atomic import write_json
-from riskmap.checkpoint import load_weights, read_sidecar, save_checkpoint
+from riskmap.infra.atomic import write_json
+from riskmap.infra.checkpoint import load_weights, read_sidecar, save_checkpoint
 
 CHECKPOINT_KIND = "traffic_cvae"
 
@@ -55,7 +55,7 @@ class TrainTrafficConfig:
 def load_windows(roots: list[Path], features: FeatureConfig, val_fraction: float,
                  max_per_episode: int = 0) -> tuple[list[SceneTensors], list[SceneTensors]]:
     """(train, validation) scene tensors of datasets collected by `riskmap collect`."""
-    from riskmap.data import DemoDataset
+    from riskmap.data.dataset import DemoDataset
 
     train, val = [], []
     for root in roots:

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from riskmap.episode import FAMILY_SETUPS
+from riskmap.sim.episode import FAMILY_SETUPS
 
 
 @dataclass(frozen=True)
@@ -106,7 +106,7 @@ def pick_victim(road, ego, config: AggressorConfig, rush: bool = False):
 
 
 def make_aggressive(run, config: AggressorConfig = AggressorConfig()):
-    """Episode hook: replace the chosen neighbour of `run` (a `riskmap.episode.Episode`) by an
+    """Episode hook: replace the chosen neighbour of `run` (a `riskmap.sim.episode.Episode`) by an
     `Aggressor` at the same state. Returns the aggressor, or None when nobody qualifies."""
     road, ego = run.base.road, run.ego
     rush = run.setup is FAMILY_SETUPS["intersection"]
@@ -121,7 +121,7 @@ def make_aggressive(run, config: AggressorConfig = AggressorConfig()):
 
 
 class AggressorHook:
-    """Callable hook for `riskmap.drive.drive_episode`; remembers the aggressor it installed.
+    """Callable hook for `riskmap.sim.rollout.drive_episode`; remembers the aggressor it installed.
 
     The ego it targets is looked up when the hook runs, after the planner's own hooks: a guard or
     planner may have replaced the ego vehicle object first, and the aggressor follows that one.

@@ -1,9 +1,11 @@
-"""Handlers of `riskmap guard ...` (the parser lives in `riskmap.cli`)."""
+"""`riskmap guard collect|train|evaluate`: the guard's accident data and its TGAT predictor."""
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
+
+from riskmap.infra.cli import positive_int
 
 
 def cmd_collect(args: argparse.Namespace) -> int:
@@ -35,8 +37,8 @@ def cmd_train(args: argparse.Namespace) -> int:
 
 
 def cmd_evaluate(args: argparse.Namespace) -> int:
-    from riskmap.atomic import write_json
     from riskmap.guard.evaluate import evaluate_checkpoint
+    from riskmap.infra.atomic import write_json
 
     result = evaluate_checkpoint(Path(args.checkpoint), Path(args.data), args.splits.split(","))
     for split, m in result.items():
@@ -49,7 +51,7 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
-def add_parser(sub, positive_int) -> None:
+def add_parsers(sub) -> None:
     """The `guard` command group under the top-level `riskmap` parser."""
     p = sub.add_parser("guard", help="the neuro-symbolic guard: accident data, TGAT training")
     guard_sub = p.add_subparsers(dest="guard_command", required=True)

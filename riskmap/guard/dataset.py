@@ -25,10 +25,10 @@ from pathlib import Path
 import numpy as np
 
 from rasterize.errors import InputError
-from riskmap.atomic import write_json, write_npz
 from riskmap.guard.events import scene_separations
 from riskmap.guard.features import EDGE_DIM, HORIZON_S, NODE_DIM, OBSERVED, SEGMENT_S, window_features
-from riskmap.provenance import provenance
+from riskmap.infra.atomic import write_json, write_npz
+from riskmap.infra.provenance import provenance
 
 PLANNER_CHECKPOINTS = {"highway-v0": "checkpoints/riskmap_highway",
                        "intersection-v0": "checkpoints/riskmap_intersection"}
@@ -142,8 +142,8 @@ class _KeepRun:
 
 
 def run_job(job: Job, config: GuardCollectConfig, env, planner) -> tuple[dict, dict]:
-    from riskmap.drive import DriveConfig, DriveHooks, drive_episode
     from riskmap.guard.aggressors import AggressorHook
+    from riskmap.sim.rollout import DriveConfig, DriveHooks, drive_episode
 
     keep = _KeepRun()
     hooks = (keep, AggressorHook()) if job.aggressive else (keep,)
@@ -166,8 +166,8 @@ def run_job(job: Job, config: GuardCollectConfig, env, planner) -> tuple[dict, d
 def collect(config: GuardCollectConfig, out: Path, resume: bool = False, progress: bool = True) -> dict:
     from tqdm import tqdm
 
-    from riskmap.episode import make_env
     from riskmap.registry import make_planner
+    from riskmap.sim.episode import make_env
 
     out = Path(out)
     jobs_dir = out / "jobs"

@@ -5,7 +5,7 @@ from __future__ import annotations
 import io
 from pathlib import Path
 
-from riskmap.atomic import atomic_write
+from riskmap.infra.atomic import atomic_write
 
 METRICS = ("ap", "auc", "accuracy", "f1")
 

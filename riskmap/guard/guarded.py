@@ -30,8 +30,8 @@ from rasterize.frames import ego_from_world, ego_pose
 from rasterize.scene import Scene
 from riskmap.guard.events import nearest_neighbours
 from riskmap.guard.features import OBSERVED, SEGMENT_S
-from riskmap.planner import PLAN_DT_S, Plan
-from riskmap.registry import HumanDriver
+from riskmap.registry import make_planner
+from riskmap.sim.plan import PLAN_DT_S, HumanDriver, Plan
 
 GUARD_CHECKPOINT = "checkpoints/guard_tgat"
 LOG = logging.getLogger("riskmap.guard")
@@ -153,7 +153,7 @@ class Guard:
 
 
 def _family_of(run) -> str:
-    from riskmap.episode import FAMILY_SETUPS
+    from riskmap.sim.episode import FAMILY_SETUPS
 
     return next((name for name, setup in FAMILY_SETUPS.items() if setup is run.setup), "")
 
@@ -237,8 +237,6 @@ def make_guarded(trigger: str, inner_spec: str, seed: int = 0, checkpoint: str =
     """A guarded planner (or guarded IDM ego) around `inner_spec`; `alert_threshold` overrides the
     checkpoint's (0.6)."""
     from riskmap.guard.system2 import DecelerationAgent, System2Config
-    from riskmap.registry import make_planner
-
     config = GuardConfig(trigger=trigger)
     predictor = None
     if trigger == "tgat":
@@ -252,3 +250,13 @@ def make_guarded(trigger: str, inner_spec: str, seed: int = 0, checkpoint: str =
     if isinstance(inner, HumanDriver):
         return GuardedHumanDriver(predictor, agent, config)
     return GuardedPlanner(inner, predictor, agent, config)
+
+
+def tgat_guarded(inner_spec: str, seed: int = 0, **_):
+    """Planner SPEC `guard:SPEC` (and `guarded:SPEC`): SPEC behind the TGAT-triggered guard."""
+    return make_guarded("tgat", inner_spec, seed=seed)
+
+
+def always_guarded(inner_spec: str, seed: int = 0, **_):
+    """Planner SPEC `guard-always:SPEC`: SPEC with the deceleration plan always on at high speed."""
+    return make_guarded("always", inner_spec, seed=seed)

@@ -18,11 +18,11 @@ import torch
 from torch import nn
 
 from rasterize.errors import InputError
-from riskmap.atomic import atomic_write, write_json
-from riskmap.checkpoint import save_checkpoint
 from riskmap.guard.dataset import load_split
 from riskmap.guard.metrics import binary_metrics
 from riskmap.guard.tgat import TGAT, TGATConfig
+from riskmap.infra.atomic import atomic_write, write_json
+from riskmap.infra.checkpoint import save_checkpoint
 
 CHECKPOINT_KIND = "guard_tgat"
 ALERT_THRESHOLD = 0.6     # the online threshold of the paper; metrics are also given at 0.5

@@ -2,8 +2,8 @@ from pathlib import Path
 
 import pytest
 
-from adversary.campaign import RunOptions, run_campaign
-from adversary.campaign_config import campaign_from_dict
+from adversary.campaign.config import campaign_from_dict
+from adversary.campaign.run import RunOptions, run_campaign
 
 TINY = {
     "name": "tiny", "seed": 0, "planners": ["cv", "idm"],

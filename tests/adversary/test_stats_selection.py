@@ -3,10 +3,10 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from adversary.monitor import collision_type
-from adversary.selection import softmin_agent_weights
-from adversary.solution import ego_only_solution
-from adversary.stats import bootstrap_mean, wilson
+from adversary.attacks.monitor import collision_type
+from adversary.attacks.selection import softmin_agent_weights
+from adversary.crash.solution import ego_only_solution
+from adversary.report.stats import bootstrap_mean, wilson
 
 
 def test_wilson_interval_matches_the_closed_form():

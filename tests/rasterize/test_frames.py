@@ -3,8 +3,14 @@ import pytest
 
 from rasterize.config import Extent, GridConfig
 from rasterize.frames import (
-    box_corners, ego_from_grid, ego_from_world, grid_from_ego, heading_from_highway_env,
-    pixel_from_ego, world_from_ego, world_from_highway_env,
+    box_corners,
+    ego_from_grid,
+    ego_from_world,
+    grid_from_ego,
+    heading_from_highway_env,
+    pixel_from_ego,
+    world_from_ego,
+    world_from_highway_env,
 )
 from tests.scenes import UNIT_GRID, UNIT_RASTER
 

@@ -1,11 +1,17 @@
+from dataclasses import replace
+
 import numpy as np
 import pytest
-from dataclasses import replace
 
 from rasterize.config import Extent, GridConfig
 from rasterize.errors import InputError
 from rasterize.maps import (
-    demo_goal_cell, demo_visitation, goal_map, motion_features, start_cell, uncertainty_map,
+    demo_goal_cell,
+    demo_visitation,
+    goal_map,
+    motion_features,
+    start_cell,
+    uncertainty_map,
 )
 from tests.scenes import UNIT_GRID, constant_velocity_scene, state
 

@@ -1,6 +1,7 @@
+from dataclasses import replace
+
 import numpy as np
 import pytest
-from dataclasses import replace
 
 from rasterize.config import Extent, RasterConfig
 from rasterize.raster import CHANNEL_INDEX, CHANNELS, history_intensity, rasterize_scene

@@ -1,6 +1,7 @@
+from dataclasses import replace
+
 import numpy as np
 import pytest
-from dataclasses import replace
 
 from rasterize.errors import InputError
 from rasterize.scene_io import check_packed, pack_scenes, unpack_scene

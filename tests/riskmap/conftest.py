@@ -1,7 +1,7 @@
 import pytest
 
-from riskmap.collect import CollectConfig, collect
-from riskmap.train import TrainConfig, train
+from riskmap.data.collect import CollectConfig, collect
+from riskmap.training.train import TrainConfig, train
 
 
 @pytest.fixture(scope="session")

@@ -5,7 +5,7 @@ from riskmap.cli import main
 
 
 def _run(*args):
-    return subprocess.run([sys.executable, "-m", "riskmap.cli", *args], capture_output=True,
+    return subprocess.run([sys.executable, "-m", "riskmap", *args], capture_output=True,
                           text=True, timeout=300)
 
 

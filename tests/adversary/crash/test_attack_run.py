@@ -10,7 +10,7 @@ from adversary.crash.attack import AttackConfig
 from adversary.crash.run import record_scenes, run_attacks, summarise
 from adversary.crash.selection import SelectionModule
 from rasterize.errors import InputError
-from riskmap.checkpoint import save_checkpoint
+from riskmap.infra.checkpoint import save_checkpoint
 
 TRAFFIC = "checkpoints/crash_traffic_highway"
 

@@ -7,13 +7,14 @@ import pytest
 
 from adversary.cli import main as adversary_main
 from adversary.crash.guard_data import GuardDataConfig, contact_onset, export, job_name, recorder_kinds
-from adversary.crash.judge import box_iou, braking_track, cached_planner, judge, rollout
+from adversary.crash.judge import box_iou, braking_track, judge, rollout
 from adversary.crash.scenes import AttackScene, record_attack_scene, save_record
 from rasterize.errors import InputError
 from rasterize.scene import AgentKind
-from riskmap.atomic import write_json
 from riskmap.guard.dataset import load_split
 from riskmap.guard.features import HORIZON_S
+from riskmap.infra.atomic import write_json
+from riskmap.registry import cached_planner
 
 # Episode 9 of highway-v0 seed 0: window row 3 drives ahead of the ego in the lane the ego keeps;
 # braking hard in front of the played-back human it is rear-ended (tests/adversary/crash/test_judge_rollout.py).

@@ -1,0 +1,7 @@
+"""`python -m adversary`: the same as the `adversary` command."""
+
+import sys
+
+from adversary.cli import main
+
+sys.exit(main())

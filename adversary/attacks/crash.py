@@ -1,0 +1,207 @@
+"""The CRASH attack of stress-test campaigns (category "selection"): pick an adversary in the job's
+scene with a selector, generate its future with the traffic model against the planner under test,
+judge the planner's closed-loop drive (adversary.crash). In a campaign config:
+
+    attacks:
+      - {name: crash, label: MAM+ASM, params: {selector: crash}}
+      - {name: crash, label: DS, params: {selector: distance, iterations: 50}}
+
+A job (planner, env, scene seed, episode) records the human's episode up to t0 + 6 s
+(adversary.crash.scenes.record_attack_scene), runs one CRASH attack on it with the job's planner
+(adversary.crash.attack.attack_records) and maps the judge's metrics onto the campaign record
+(`crash_record`). Models are read from `traffic_model` / `selector_model`, where `{family}` stands
+for the job's scenario family (highway, intersection); the defaults are the shipped checkpoints.
+
+Differences to the episode attacks, all visible in the record:
+- the episode is t0 + 6 s long (8 s by default) at 10 Hz with a plan every 0.5 s, CRASH's own
+  rates: the campaign's budget does not apply;
+- collisions are judged on box overlap (IoU > 0.02) from t0 on (adversary.crash.judge), with the
+  ego passing through other boxes; `collided` is any such collision (or one before t0),
+  `collided_with_adversary` the CRASH/STRIVE collision; kinematic value, collision type and the
+  solution check exist only for collisions with the adversary;
+- progress_m and min_gap_m span t0 to the collision (the end without one); Safety % is not
+  measured (None).
+A scene that cannot be attacked (the human crashed or left the road before t0 + 6 s, no vehicle
+within 60 m of the ego, or no candidate for the selector) gives an "ok" record with
+`attacked: false` and the reason in `not_attacked`: it counts in every denominator as a job
+without a collision, as in CRASH's own tables, and the report shows how many there were.
+"""
+
+from __future__ import annotations
+
+import io
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from adversary.attacks.base import AttackEntry
+from adversary.attacks.episode import attack_seed
+from rasterize.config import family_of_env
+from rasterize.errors import InputError
+from riskmap.infra.config_mapping import require
+from riskmap.registry import cached_planner
+
+# CRASH's SELECTORS (adversary.crash.selection), spelt out so that reading a config does not
+# import torch; tests/adversary/test_crash_attack.py checks the two agree.
+SELECTORS = ("crash", "crash-no-mam", "distance", "distance+mam", "nearest", "random")
+LEARNED_SELECTORS = ("crash", "crash-no-mam")
+HISTORY_S = 2.0                    # the traffic model's history (adversary.crash.scenes.HISTORY_S)
+WINDOW_DT_S = 0.5                  # its step
+# The judge's collision types as the campaign monitor names them (adversary.attacks.monitor); cut-in has
+# no counterpart there and keeps its name.
+COLLISION_TYPE_NAMES = {"side-swipe": "sideswipe", "T-bone": "side (angle)"}
+
+
+@dataclass(frozen=True)
+class CrashAttackParams:
+    selector: str = "crash"            # crash (MAM+ASM), crash-no-mam (ASM), distance (STRIVE),
+    #                                    distance+mam, nearest, random
+    replan_every: int = 20             # k: the planner is re-run every k generation iterations
+    iterations: int = 0                # Adam iterations; 0: CRASH's 300 (replay) / 200 (closed loop)
+    traffic_model: str = "checkpoints/crash_traffic_{family}"      # {family}: the job's family
+    selector_model: str = "checkpoints/crash_selector_{family}"    # dir with selector_mam, _no_mam
+    t0_s: float = 2.0                  # attack time (s into the episode), >= 2 s of history
+
+    def __post_init__(self) -> None:
+        require(self.selector in SELECTORS, f"crash attack selector {self.selector!r} is unknown; "
+                                            f"use one of {', '.join(SELECTORS)}")
+        require(self.replan_every >= 1, f"crash attack replan_every must be >= 1, got {self.replan_every}")
+        require(self.iterations >= 0, f"crash attack iterations must be >= 0 (0: CRASH's defaults), "
+                                      f"got {self.iterations}")
+        steps = self.t0_s / WINDOW_DT_S
+        require(self.t0_s >= HISTORY_S and abs(steps - round(steps)) < 1e-9,
+                f"crash attack t0_s={self.t0_s}: use a multiple of {WINDOW_DT_S} s that is >= {HISTORY_S}")
+        for name in ("traffic_model", "selector_model"):
+            try:
+                getattr(self, name).format(family="highway")
+            except (KeyError, IndexError, ValueError):
+                raise InputError(f"crash attack {name} {getattr(self, name)!r}: the only placeholder "
+                                 "allowed is {family}") from None
+
+    def paths(self, env_id: str) -> tuple[Path, Path | None]:
+        """(traffic model, selector dir or None when the selector needs none) for an env."""
+        family = family_of_env(env_id)
+        selector = (Path(self.selector_model.format(family=family))
+                    if self.selector in LEARNED_SELECTORS else None)
+        return Path(self.traffic_model.format(family=family)), selector
+
+    def check_envs(self, envs: list[str]) -> None:
+        """Every checkpoint the attack needs on `envs` exists (adversary.campaign.run checks this
+        before a campaign starts)."""
+        for env_id in envs:
+            traffic, selector = self.paths(env_id)
+            require(traffic.with_suffix(".json").is_file(),
+                    f"crash attack on {env_id}: no traffic model {traffic} (.json/.safetensors); train "
+                    "one with `adversary train-traffic` or set params.traffic_model")
+            if selector is not None:
+                missing = [n for n in ("selector_mam", "selector_no_mam")
+                           if not (selector / f"{n}.json").is_file()]
+                require(not missing, f"crash attack on {env_id}: {selector} holds no {missing[0] if missing else ''}; "
+                                     "train selectors with `adversary train-selector`, set "
+                                     "params.selector_model, or use selector distance")
+
+    def attack_config(self):
+        from adversary.crash.attack import AttackConfig
+
+        extra = ({} if self.iterations == 0 else
+                 {"iterations_replay": self.iterations, "iterations_closed_loop": self.iterations})
+        return AttackConfig(selector=self.selector, replan_every=self.replan_every, **extra)
+
+
+# Loaded models per process and (traffic model, selector dir): loading costs about a second and
+# the models are only read, so reuse does not change results.
+_MODELS: dict = {}
+
+
+def _models(traffic: Path, selector: Path | None):
+    from adversary.crash.attack import load_models
+
+    key = (str(traffic), None if selector is None else str(selector))
+    if key not in _MODELS:
+        _MODELS[key] = load_models(traffic, selector)
+    return _MODELS[key]
+
+
+def _not_attacked(reason: str, extra: dict) -> dict:
+    """The record of a job whose scene could not be attacked (module docstring)."""
+    return {"attacked": False, "not_attacked": reason, "collided": False, "ego_off_road": False,
+            "has_adversary": False, "collided_with_adversary": False, "collision_type": None,
+            "collision_time_s": None, "kinematic_mps": None, "adversary_off_road": None,
+            "other_off_road": False, "encounters": None, "dangerous_encounters": None,
+            "safety_pct": None, "solution_found": None, "progress_m": None, "mean_speed_mps": None,
+            "min_gap_m": None, "simulated_s": None, "env_seed": None, "plan_calls": None,
+            "attack_extra": extra, "timing": {"plan_ms_median": None}}
+
+
+def crash_record(result: dict, scene_s: float) -> dict:
+    """Campaign record fields (adversary.campaign.job._record's) from one `attack_records` result."""
+    extra = {"selector": result["selector"], "p": result["p"], "candidates": result["candidates"],
+             "agents": result["agents"]}
+    timing = {"plan_ms_median": None, "attack_seconds": round(result["seconds"], 3)}
+    if result["status"] != "ok":
+        return {**_not_attacked(f"no candidate adversary for selector {result['selector']}", extra),
+                "timing": timing}
+    m = result["metrics"]
+    extra.update({"adversary_row": result["adversary_row"], "adversary_log_id": result["adversary_log_id"],
+                  "iterations": result["generation"]["iterations"],
+                  "replans": result["generation"]["replans"],
+                  "rollouts": result["timing"]["rollouts"], "collision_iou": m["collision_iou"],
+                  "collision_any_row": m["collision_any_row"],
+                  "collision_before_t0": m["collision_before_t0"],
+                  "crash_collision_type": m["collision_type"]})
+    adversary_hit = bool(m["collision"])
+    return {"attacked": True, "not_attacked": None,
+            "collided": adversary_hit or bool(m["collision_any"]) or bool(m["collision_before_t0"]),
+            "ego_off_road": bool(m["ego_off_road"]), "has_adversary": True,
+            "collided_with_adversary": adversary_hit,
+            "collision_type": COLLISION_TYPE_NAMES.get(m["collision_type"], m["collision_type"]),
+            "collision_time_s": m["collision_time_s"] if adversary_hit else m["collision_any_time_s"],
+            "kinematic_mps": m["kinematic_value_mps"],
+            "adversary_off_road": bool(m["adversary_off_road"]),
+            "other_off_road": bool(m["other_off_road"]),
+            "encounters": None, "dangerous_encounters": None, "safety_pct": None,
+            "solution_found": m["solution_found"], "progress_m": m["ego_progress_m"],
+            "mean_speed_mps": None, "min_gap_m": m["min_gap_m"], "simulated_s": scene_s,
+            "env_seed": None, "plan_calls": None, "attack_extra": extra,
+            "timing": {**timing, "generation_seconds": result["generation"]["batch_seconds"]}}
+
+
+def _panel_artifact(panel: Path) -> bytes | None:
+    """npz bytes holding the attack's panel PNG (adversary.crash.panel) for the report's gallery."""
+    if not panel.is_file():
+        return None
+    buffer = io.BytesIO()
+    np.savez_compressed(buffer, crash_panel_png=np.frombuffer(panel.read_bytes(), dtype=np.uint8))
+    return buffer.getvalue()
+
+
+def crash_job(job) -> tuple[dict, bytes | None]:
+    """(record fields, artifact) of one campaign job of the crash attack (module docstring)."""
+    from adversary.crash.attack import attack_records
+    from adversary.crash.scenes import AttackScene, record_attack_scene
+
+    params: CrashAttackParams = job.attack_params
+    scene = AttackScene(job.env_id, job.scene_seed, job.episode, params.t0_s)
+    try:
+        record = record_attack_scene(scene)   # 10 Hz: CRASH's judge drives at its own rates
+    except InputError as error:
+        return _not_attacked(str(error), {"selector": params.selector}), None
+    planner = cached_planner(job.planner, job.planner_seed)
+    traffic, selector = params.paths(job.env_id)
+    models = _models(traffic, selector)
+    # The same seed as the episode attacks': only the random selector draws.
+    seed = attack_seed(job)
+    with tempfile.TemporaryDirectory() as tmp:
+        panel = Path(tmp) / "panel.png"
+        [result] = attack_records([record], models, planner, job.planner, params.attack_config(), [seed],
+                                  [panel])
+        artifact = _panel_artifact(panel)
+    return crash_record(result, scene.t0_s + scene.horizon_s), artifact
+
+
+ENTRY = AttackEntry("crash", CrashAttackParams, "selection",
+                    "CRASH: a selector picks the adversary in the recorded scene, the traffic model "
+                    "generates its future against the planner (closed loop, replanned every k iterations)",
+                    run_job=crash_job)

@@ -1,0 +1,119 @@
+"""How a campaign job drives its episode and what it records of it, shared by every attack.
+
+`drive_with_hooks` drives the job's scene with an attack's episode hooks (categories baseline,
+rule); `record_of` turns a driven episode and its `EpisodeMonitor` into the job record's fields,
+`artifact_of` into the npz the report's gallery draws. `job` is a campaign job
+(adversary.campaign.job.Job), read by attribute.
+"""
+
+from __future__ import annotations
+
+import io
+
+import numpy as np
+
+from adversary.attacks.monitor import EpisodeMonitor
+from riskmap.registry import cached_planner
+from riskmap.sim.plan import HumanDriver
+
+
+def attack_seed(job) -> int:
+    """The seed of the job's attack: the same for every attack of one (planner seed, scene)."""
+    return int(np.random.SeedSequence([job.planner_seed, job.scene_seed, job.episode])
+               .generate_state(1)[0])
+
+
+class RecordingPlanner:
+    """Passes plans through and keeps the last (scene, plan) for the report's gallery."""
+
+    def __init__(self, planner):
+        self.inner = planner
+        self.last = None
+
+    @property
+    def raster(self):
+        return self.inner.raster
+
+    def reset(self, scene) -> None:
+        self.last = None
+        self.inner.reset(scene)
+
+    def plan(self, scene):
+        plan = self.inner.plan(scene)
+        self.last = (scene, plan)
+        return plan
+
+
+def artifact_of(monitor: EpisodeMonitor, recording: RecordingPlanner | None, env_id: str) -> bytes:
+    """npz bytes: the final scene with 8 s of history, the last planning scene and its plan."""
+    from rasterize.frames import world_from_highway_env
+    from rasterize.scene_io import pack_scenes
+
+    run = monitor.run
+    final = run.recorder.scene(run.recorder.num_steps - 1, history_s=8.0, future_s=0.0,
+                               source=env_id)
+    arrays = {f"final__{k}": v for k, v in pack_scenes([final]).items()}
+    adversary = monitor.attack.adversary
+    index = -1
+    if adversary is not None:
+        where = world_from_highway_env(adversary.position)
+        offsets = np.linalg.norm(final.states[:, final.current_index, :2] - where, axis=1)
+        offsets[~final.valid[:, final.current_index]] = np.inf
+        index = int(np.argmin(offsets)) if offsets.min() < 1e-3 else -1
+    arrays["adversary_index"] = np.array(index)
+    if recording is not None and recording.last is not None:
+        scene, plan = recording.last
+        arrays.update({f"plan_scene__{k}": v for k, v in pack_scenes([scene.past()]).items()})
+        arrays["plan__waypoints"] = plan.waypoints
+        for name in ("risk_map", "svf"):
+            if getattr(plan, name) is not None:
+                arrays[f"plan__{name}"] = np.asarray(getattr(plan, name), np.float32)
+    buffer = io.BytesIO()
+    np.savez_compressed(buffer, **arrays)
+    return buffer.getvalue()
+
+
+def record_of(episode: dict, monitor: EpisodeMonitor, extra: dict) -> dict:
+    """The job's measurements from one driven episode and its monitor."""
+    from adversary.crash.solution import ego_only_solution
+
+    solution = None
+    if episode["collided"] and monitor.collision_step is not None:
+        states, valid, sizes, _ = monitor.run.recorder.arrays()
+        solution = ego_only_solution(states, valid, sizes, monitor.run.recorder.ego_id,
+                                     monitor.collision_step, monitor.run.dt)
+    return {
+        "collided": bool(episode["collided"]),
+        "ego_off_road": bool(episode["off_road"]),
+        **monitor.summary(),
+        "solution_found": solution,
+        "progress_m": episode["distance_m"],
+        "mean_speed_mps": episode["mean_speed_mps"],
+        "min_gap_m": episode["min_gap_m"] if np.isfinite(episode["min_gap_m"]) else None,
+        "simulated_s": episode["simulated_s"],
+        "env_seed": episode["env_seed"],
+        "plan_calls": episode["plan_calls"],
+        # Optional, attack-specific numbers (e.g. a search's generations and Pareto front).
+        "attack_extra": extra,
+        "timing": {"plan_ms_median": episode["plan_ms_median"]},
+    }
+
+
+def drive_with_hooks(job, factory) -> tuple[dict, bytes]:
+    """Drive the job's scene with the hooks `factory(params, seed)` makes (categories baseline,
+    rule)."""
+    from riskmap.sim.episode import cached_env
+    from riskmap.sim.rollout import DriveConfig, DriveHooks, drive_episode
+
+    config = DriveConfig(job.env_id, episodes=job.episode + 1, seed=job.scene_seed,
+                         control_hz=job.budget.control_hz, replan_hz=job.budget.replan_hz,
+                         episode_s=job.budget.episode_s)
+    planner = cached_planner(job.planner, job.planner_seed)
+    env = cached_env(job.env_id, job.budget.control_hz)
+    recording = None if isinstance(planner, HumanDriver) else RecordingPlanner(planner)
+    attack = factory(job.attack_params, attack_seed(job))
+    monitor = EpisodeMonitor(attack, job.safety, job.budget.control_hz)
+    episode = drive_episode(env, recording or planner, config,
+                            job.episode, hooks=DriveHooks(on_reset=monitor.start, on_step=monitor.step))
+    extra = attack.extra() if hasattr(attack, "extra") else {}
+    return record_of(episode, monitor, extra), artifact_of(monitor, recording, job.env_id)

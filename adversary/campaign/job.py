@@ -1,0 +1,88 @@
+"""One stress-test job: (planner SPEC, env id, scene, attack + params) -> one result record.
+
+`run_job` is the only function the execution backends call; it is a plain top-level function of
+picklable arguments, so a process pool and Ray run exactly the same code. Results depend only on
+the job (fresh episode from its seed, planner state reset per episode), never on which worker or
+in which order jobs run, so a resumed or distributed campaign gives the same numbers.
+
+The attack's entry decides how the job runs (adversary.attacks.base): an attack with episode
+hooks drives the job's scene with them (`drive_with_hooks`); the others run the whole job
+themselves (search attacks: a seeded scenario search, then the replay of its most critical
+scenario; `crash`: CRASH on the job's recorded scene).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import re
+import time
+import traceback
+from dataclasses import dataclass
+
+from adversary.attacks.episode import drive_with_hooks
+from adversary.attacks.monitor import SafetyConfig
+from adversary.attacks.registry import attack_entry
+from riskmap.infra.config_mapping import to_plain
+
+
+@dataclass(frozen=True)
+class Budget:
+    episode_s: float | None = None    # simulated seconds per episode; None: the family's default
+    control_hz: int = 10              # simulation and control rate
+    replan_hz: int = 2
+
+
+@dataclass(frozen=True)
+class Job:
+    planner: str              # SPEC (riskmap.registry)
+    env_id: str
+    scene_seed: int           # the scene is episode `episode` of `riskmap drive --seed scene_seed`
+    episode: int
+    attack: str               # the attack's label in the campaign
+    attack_name: str          # its registered name
+    attack_params: object     # its frozen params dataclass
+    planner_seed: int
+    budget: Budget
+    safety: SafetyConfig
+
+    @property
+    def job_id(self) -> str:
+        """Readable and unique: the key fields, then a hash of every field."""
+        digest = hashlib.sha1(json.dumps(to_plain(self), sort_keys=True).encode()).hexdigest()[:10]
+        slug = re.sub(r"[^A-Za-z0-9]+", "-", f"{self.planner}_{self.env_id}_s{self.scene_seed}"
+                      f"e{self.episode}_{self.attack}").strip("-")
+        return f"{slug[-80:]}-{digest}"
+
+    def describe(self) -> dict:
+        entry = attack_entry(self.attack_name)
+        return {"job_id": self.job_id, "planner": self.planner, "env_id": self.env_id,
+                "scene_seed": self.scene_seed, "episode": self.episode, "attack": self.attack,
+                "attack_name": self.attack_name, "attack_category": entry.category,
+                "attack_params": to_plain(self.attack_params)}
+
+
+def error_result(job: Job, error: BaseException, trace: str = "") -> dict:
+    """The result of a job that failed: its record carries the error's first line."""
+    record = {**job.describe(), "status": "error",
+              "error": (f"{type(error).__name__}: {error}".splitlines() or [""])[0][:500],
+              "traceback": trace[-2000:], "timing": {}}
+    return {"record": record, "artifact": None}
+
+
+def run_job(job: Job) -> dict:
+    """{"record": dict, "artifact": npz bytes or None}; a failure is a record, never a raise."""
+    started = time.perf_counter()
+    try:
+        import torch
+
+        torch.set_num_threads(1)
+        entry = attack_entry(job.attack_name)
+        record, artifact = (entry.run_job(job) if entry.run_job is not None
+                            else drive_with_hooks(job, entry.factory))
+        result = {"record": {**job.describe(), "status": "ok", "error": None, **record},
+                  "artifact": artifact}
+    except Exception as error:  # noqa: BLE001  (a failing job is recorded and the campaign goes on)
+        result = error_result(job, error, traceback.format_exc(limit=4))
+    result["record"]["timing"]["wall_s"] = time.perf_counter() - started
+    return result

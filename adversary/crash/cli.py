@@ -1,0 +1,189 @@
+"""The CRASH subcommands: `adversary train-traffic` (the traffic CVAE), `train-selector` (ASM),
+`scenes` (record held-out attack scenes) and `attack` (select, generate, judge)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from riskmap.infra.cli import positive_int
+
+
+def _run_train_traffic(args: argparse.Namespace) -> int:
+    import torch
+
+    from adversary.crash.train_traffic import TrainTrafficConfig, train_traffic
+
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    config = TrainTrafficConfig(epochs=args.epochs, batch_size=args.batch_size, lr=args.lr,
+                                kl_weight=args.kl_weight, free_bits=args.free_bits, seed=args.seed,
+                                max_windows_per_episode=args.max_windows_per_episode)
+    summary = train_traffic([Path(d) for d in args.data], Path(args.out), config, resume=args.resume,
+                            progress=not args.quiet)
+    print(json.dumps(summary["val"], indent=1))
+    print(f"best checkpoint: {Path(args.out) / 'best.safetensors'}")
+    return 0
+
+
+def add_parsers(subparsers) -> None:
+    add_attack_parsers(subparsers)
+    add_guard_data_parser(subparsers)
+    p = subparsers.add_parser("train-traffic", help="train the traffic CVAE on collected windows")
+    p.add_argument("--data", action="append", required=True,
+                   help="a dataset from `riskmap collect` (repeat for several)")
+    p.add_argument("--out", required=True, help="run directory (best.safetensors, log.jsonl, summary.json)")
+    p.add_argument("--epochs", type=positive_int, default=30)
+    p.add_argument("--batch-size", type=positive_int, default=32)
+    p.add_argument("--lr", type=float, default=1e-3)
+    p.add_argument("--kl-weight", type=float, default=0.05)
+    p.add_argument("--free-bits", type=float, default=2.0, help="nats of KL per agent left unpenalised")
+    p.add_argument("--max-windows-per-episode", type=int, default=0,
+                   help="use at most this many windows of each episode (0: all)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--threads", type=int, default=0, help="torch CPU threads (0: torch's default)")
+    p.add_argument("--resume", action="store_true")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=_run_train_traffic)
+
+
+def _run_train_selector(args: argparse.Namespace) -> int:
+    import torch
+
+    from adversary.crash.train_selector import TrainSelectorConfig, train_selector
+
+    torch.set_num_threads(args.threads or 1)
+    config = TrainSelectorConfig(label_iterations=args.label_iterations, max_scenes=args.max_scenes,
+                                 windows_per_episode=args.windows_per_episode, epochs=args.epochs,
+                                 seed=args.seed)
+    summary = train_selector(Path(args.traffic_model), [Path(d) for d in args.data], Path(args.out), config,
+                             resume=args.resume, progress=not args.quiet)
+    print(json.dumps({k: summary[k] for k in ("selector_mam", "selector_no_mam", "val_baselines")}, indent=1))
+    return 0
+
+
+def _run_scenes(args: argparse.Namespace) -> int:
+    from adversary.crash.run import record_scenes
+
+    index = record_scenes(args.env, args.seed, args.count, Path(args.out), args.first_episode, args.t0,
+                          resume=args.resume, progress=not args.quiet)
+    print(f"{len(index['scenes'])} scenes in {args.out} ({len(index['skipped'])} episodes skipped)")
+    return 0
+
+
+def default_models(scenes: Path, traffic: str | None, selectors: str | None) -> tuple[Path, Path]:
+    """The given model paths, else the shipped ones of the scenes' family."""
+    from adversary.crash.run import INDEX
+    from rasterize.config import family_of_env
+    from rasterize.errors import InputError
+
+    if traffic is None or selectors is None:
+        try:
+            family = family_of_env(json.loads((scenes / INDEX).read_text())["env_id"])
+        except (OSError, ValueError, KeyError):
+            raise InputError(f"--scenes {scenes} holds no scene index; make one with `adversary scenes`") from None
+        traffic = traffic or f"checkpoints/crash_traffic_{family}"
+        selectors = selectors or f"checkpoints/crash_selector_{family}"
+    return Path(traffic), Path(selectors)
+
+
+def _run_attack(args: argparse.Namespace) -> int:
+    from adversary.crash.attack import AttackConfig
+    from adversary.crash.run import TABLE_HEADER, run_attacks, table_row
+
+    config = AttackConfig(selector=args.selector, replan_every=args.replan_every,
+                          iterations_replay=args.iterations or 300,
+                          iterations_closed_loop=args.iterations or 200,
+                          stop_on_collision=not args.full_iterations)
+    needs_selector = args.selector in ("crash", "crash-no-mam")
+    traffic, selectors = default_models(Path(args.scenes), args.traffic_model, args.selector_model)
+    summary = run_attacks(args.planner, Path(args.scenes), args.count, config, args.seed, Path(args.out),
+                          traffic, selectors if needs_selector else None,
+                          workers=args.workers, resume=args.resume, panels=args.panels,
+                          progress=not args.quiet, batch_size=args.batch_size)
+    print(TABLE_HEADER)
+    print(table_row(f"{args.planner} / {args.selector}", summary["summary"]))
+    return 0
+
+
+def add_attack_parsers(subparsers) -> None:
+    from adversary.crash.selection import SELECTORS
+
+    p = subparsers.add_parser("train-selector", help="train CRASH's adversarial-agent selection module")
+    p.add_argument("--traffic-model", required=True, help="checkpoint from `adversary train-traffic`")
+    p.add_argument("--data", action="append", required=True, help="training dataset (repeatable)")
+    p.add_argument("--out", required=True)
+    p.add_argument("--label-iterations", type=positive_int, default=60)
+    p.add_argument("--max-scenes", type=positive_int, default=250)
+    p.add_argument("--windows-per-episode", type=positive_int, default=4)
+    p.add_argument("--epochs", type=positive_int, default=300)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--resume", action="store_true")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=_run_train_selector)
+
+    p = subparsers.add_parser("scenes", help="record held-out attack scenes from highway-env episodes")
+    p.add_argument("--env", required=True, help="highway-v0 or intersection-v0")
+    p.add_argument("--seed", type=int, required=True)
+    p.add_argument("--count", type=positive_int, required=True)
+    p.add_argument("--out", required=True)
+    p.add_argument("--first-episode", type=int, default=0)
+    p.add_argument("--t0", type=float, default=2.0, help="attack time in the episode (s)")
+    p.add_argument("--resume", action="store_true")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=_run_scenes)
+
+    p = subparsers.add_parser("attack", help="CRASH / distance-based attacks on recorded scenes")
+    p.add_argument("--planner", required=True, help="the ego under test: replay, idm, riskmap:CKPT, guarded:...")
+    p.add_argument("--scenes", required=True, help="a directory from `adversary scenes`")
+    p.add_argument("--count", type=positive_int, required=True)
+    p.add_argument("--selector", choices=SELECTORS, default="crash")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", required=True)
+    p.add_argument("--workers", type=positive_int, default=1)
+    p.add_argument("--batch-size", type=positive_int, default=8, help="scenes optimised together")
+    p.add_argument("--traffic-model", default=None,
+                   help="traffic CVAE checkpoint (default: checkpoints/crash_traffic_<family>)")
+    p.add_argument("--selector-model", default=None,
+                   help="directory with selector_mam / selector_no_mam (default: checkpoints/crash_selector_<family>)")
+    p.add_argument("--replan-every", type=positive_int, default=20, help="k: planner re-runs every k iterations")
+    p.add_argument("--iterations", type=int, default=0, help="0: 300 for replay, 200 for a closed-loop planner")
+    p.add_argument("--full-iterations", action="store_true", help="do not stop at the first collision")
+    p.add_argument("--panels", type=int, default=0, help="write PNG panels of the first N scenes")
+    p.add_argument("--resume", action="store_true")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=_run_attack)
+
+
+def _run_guard_data(args: argparse.Namespace) -> int:
+    from adversary.crash.guard_data import GuardDataConfig, export
+
+    config = GuardDataConfig(split=args.split, val_fraction=args.val_fraction, cut=args.cut)
+    summary = export([Path(d) for d in args.attacks], Path(args.out), config, resume=args.resume,
+                     progress=not args.quiet)
+    for split, c in summary["splits"].items():
+        print(f"{split}: {c['windows']} windows ({c['positives']} positive) from {c['episodes']} attack "
+              f"records ({c['crashes']} crashes)")
+    print(f"{summary['partner_is_adversary']}/{sum(c['crashes'] for c in summary['splits'].values())} crashes: "
+          f"positives name the adversary; skipped {summary['skipped']}")
+    return 0
+
+
+def add_guard_data_parser(subparsers) -> None:
+    p = subparsers.add_parser("guard-data", help="guard accident windows from attack runs (positives from "
+                                                 "the adversary's collisions)")
+    p.add_argument("--attacks", action="append", required=True,
+                   help="an `adversary attack --out` directory (repeat for several)")
+    p.add_argument("--out", required=True, help="guard dataset directory (may already hold natural windows)")
+    p.add_argument("--split", default="adversarial",
+                   help="split of the windows, e.g. adversarial (held-out test) or train")
+    p.add_argument("--val-fraction", type=float, default=0.0,
+                   help="the last share of each run's scenes goes to the val split")
+    p.add_argument("--cut", default="contact", choices=("contact", "judge"),
+                   help="cut a collision at the onset of the box contact (as highway-env ends natural "
+                        "episodes) or at the judged step (IoU > 0.02)")
+    p.add_argument("--resume", action="store_true")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=_run_guard_data)

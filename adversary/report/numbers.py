@@ -1,0 +1,177 @@
+"""Every number of a campaign report, computed from the result records alone.
+
+Records are grouped by (planner, attack) over all scenes, and by (family, planner, attack).
+Rates carry Wilson intervals, means percentile-bootstrap intervals (adversary.report.stats):
+
+    collision rate           ego collisions / finished jobs
+    adversary collision      collisions with the attack's adversary / jobs whose attack had one
+    adversary off-road       adversary off the road before any collision / jobs with an adversary
+    other off-road           another vehicle near the ego off the road before a collision / jobs
+    kinematic value (m/s)    mean |v_ego - v_partner| over collisions
+    solution rate            collisions the ego alone could have avoided / collisions
+    Safety %                 mean (and 90th percentile) over jobs of the per-episode Safety %
+                             (jobs that do not measure it, e.g. the crash attack's, are left out)
+    progress (m)             mean distance driven
+
+The CRASH ablation (attacks of category "selection") has one row per (attack label, planner), as
+CRASH's Table III: its collision rate is collisions with the adversary over every finished job,
+scenes that could not be attacked included (`not_attacked` counts them).
+
+Timings (plan ms, wall s) depend on the machine; they sit apart under "timing".
+"""
+
+from __future__ import annotations
+
+from collections import Counter, defaultdict
+
+import numpy as np
+
+from adversary.report.stats import bootstrap_mean, wilson
+from rasterize.config import family_of_env
+
+COLLISION_TYPES = ("ego rear-ends", "ego rear-ended", "sideswipe", "side (angle)", "head-on", "cut-in")
+
+
+def _group_metrics(records: list[dict]) -> dict:
+    ok = [r for r in records if r["status"] == "ok"]
+    adv = [r for r in ok if r.get("has_adversary")]
+    collided = [r for r in ok if r["collided"]]
+    solved = [r for r in collided if r.get("solution_found") is not None]
+    return {
+        "jobs": len(records), "failed": len(records) - len(ok),
+        "collision_rate": wilson(len(collided), len(ok)),
+        "adversary_collision_rate": wilson(sum(r["collided_with_adversary"] for r in adv), len(adv)),
+        "adversary_off_road": wilson(sum(bool(r["adversary_off_road"]) for r in adv), len(adv)),
+        "other_off_road": wilson(sum(bool(r["other_off_road"]) for r in ok), len(ok)),
+        "kinematic_mps": bootstrap_mean([r["kinematic_mps"] for r in collided]),
+        "solution_rate": wilson(sum(bool(r["solution_found"]) for r in solved), len(solved)),
+        "safety_pct": bootstrap_mean([r["safety_pct"] for r in ok]),
+        "progress_m": bootstrap_mean([r["progress_m"] for r in ok]),
+    }
+
+
+def _ablation_metrics(records: list[dict]) -> dict:
+    """The CRASH ablation's numbers of one (attack, planner) group (module docstring)."""
+    ok = [r for r in records if r["status"] == "ok"]
+    attacked = [r for r in ok if r.get("attacked", True)]
+    hits = [r for r in ok if r["collided_with_adversary"]]
+    solved = [r for r in hits if r.get("solution_found") is not None]
+    return {
+        "jobs": len(records), "failed": len(records) - len(ok), "not_attacked": len(ok) - len(attacked),
+        "adversary_collision_rate": wilson(len(hits), len(ok)),
+        "collision_rate": wilson(sum(bool(r["collided"]) for r in ok), len(ok)),
+        "adversary_off_road": wilson(sum(bool(r["adversary_off_road"]) for r in attacked), len(attacked)),
+        "other_off_road": wilson(sum(bool(r["other_off_road"]) for r in attacked), len(attacked)),
+        "kinematic_mps": bootstrap_mean([r["kinematic_mps"] for r in hits]),
+        "solution_rate": wilson(sum(bool(r["solution_found"]) for r in solved), len(solved)),
+    }
+
+
+def _ablation(records: list[dict]) -> tuple[list[dict], list[dict]] | tuple[None, None]:
+    """(rows, timing rows) of the CRASH ablation, in the same (attack, planner) order."""
+    groups: dict[tuple, list[dict]] = defaultdict(list)
+    for r in records:
+        groups[r["attack"], r["planner"]].append(r)
+    if not groups:
+        return None, None
+    keys = sorted(groups)
+    return ([{"attack": a, "planner": p, **_ablation_metrics(groups[a, p])} for a, p in keys],
+            [{"attack": a, "planner": p, **_timing(groups[a, p])} for a, p in keys])
+
+
+def _timing(records: list[dict]) -> dict:
+    plan = [r["timing"].get("plan_ms_median") for r in records
+            if r.get("timing", {}).get("plan_ms_median") is not None]
+    wall = [r["timing"]["wall_s"] for r in records if "wall_s" in r.get("timing", {})]
+    return {"plan_ms_median": float(np.median(plan)) if plan else None,
+            "job_wall_s_median": float(np.median(wall)) if wall else None,
+            "job_wall_s_total": float(np.sum(wall)) if wall else None}
+
+
+def _rows(records: list[dict], keys: tuple[str, ...]) -> tuple[list[dict], list[dict]]:
+    groups: dict[tuple, list[dict]] = defaultdict(list)
+    for r in records:
+        groups[tuple(r[k] for k in keys)].append(r)
+    rows, timing = [], []
+    for key in sorted(groups):
+        rows.append({**dict(zip(keys, key)), **_group_metrics(groups[key])})
+        timing.append({**dict(zip(keys, key)), **_timing(groups[key])})
+    return rows, timing
+
+
+def _collision_types(records: list[dict]) -> list[dict]:
+    counts: dict[tuple, Counter] = defaultdict(Counter)
+    for r in records:
+        if r["status"] == "ok":
+            # a crash attack's collision with a vehicle other than its adversary has no type
+            counts[r["planner"], r["attack"]].update([r["collision_type"]] if r["collided"]
+                                                     and r["collision_type"] else [])
+    return [{"planner": p, "attack": a, **{t: counts[p, a][t] for t in COLLISION_TYPES},
+             "total": sum(counts[p, a].values())} for p, a in sorted(counts)]
+
+
+def _guard_pairs(rows: list[dict]) -> list[dict]:
+    """Rows of `guard:SPEC` (or `guarded:SPEC`) next to the same attack on SPEC, when both ran."""
+    by_key = {(r["planner"], r["attack"]): r for r in rows}
+    pairs = []
+    metrics = ("collision_rate", "safety_pct", "progress_m")
+    for (planner, attack), guarded in sorted(by_key.items()):
+        prefix, _, inner = planner.partition(":")
+        if prefix in ("guard", "guarded") and (inner, attack) in by_key:
+            base = by_key[inner, attack]
+            pairs.append({"planner": inner, "attack": attack,
+                          "off": {k: base[k] for k in metrics},
+                          "on": {k: guarded[k] for k in metrics}})
+    return pairs
+
+
+def _search_history(records: list[dict]) -> list[dict]:
+    """Per-generation collisions and Pareto fronts that search attacks put in attack_extra."""
+    out = []
+    for r in records:
+        extra = r.get("attack_extra") or {}
+        if r["status"] == "ok" and r["attack_category"] == "search" and (
+                extra.get("generations") or extra.get("pareto_front")):
+            out.append({"job_id": r["job_id"], "planner": r["planner"], "attack": r["attack"],
+                        "generations": extra.get("generations") or [],
+                        "pareto_front": extra.get("pareto_front") or [],
+                        "objective_names": extra.get("objective_names") or []})
+    return out
+
+
+def worst_scenes(records: list[dict], count: int) -> list[dict]:
+    """The `count` worst finished jobs: collisions first (with the adversary, then faster), then
+    the most dangerous Safety %; ties by job id."""
+    ok = [r for r in records if r["status"] == "ok"]
+    ok.sort(key=lambda r: (not r["collided"], not r["collided_with_adversary"],
+                           -(r["kinematic_mps"] or 0.0), -(r["safety_pct"] or 0.0), r["job_id"]))
+    return ok[:count]
+
+
+def report_numbers(records: list[dict], gallery: int) -> tuple[dict, dict]:
+    """(results, timing): everything the page shows; timing is machine-dependent."""
+    for r in records:
+        r.setdefault("family", family_of_env(r["env_id"]))
+    comparison, timing_rows = _rows(records, ("planner", "attack"))
+    by_family, _ = _rows(records, ("family", "planner", "attack"))
+    selection = [r for r in records if r["attack_category"] == "selection"]
+    search = [r for r in records if r["attack_category"] == "search"]
+    ablation, ablation_timing = _ablation(selection)
+    results = {
+        "jobs": len(records),
+        "failed": sum(r["status"] != "ok" for r in records),
+        "comparison": comparison,
+        "by_family": by_family,
+        "collision_types": _collision_types(records),
+        "crash_ablation": ablation,
+        "search": _rows(search, ("attack", "planner"))[0] if search else None,
+        "search_history": _search_history(records),
+        "guard": _guard_pairs(comparison) or None,
+        "worst": [{k: r[k] for k in ("job_id", "planner", "env_id", "scene_seed", "episode", "attack",
+                                     "collided", "collided_with_adversary", "collision_type",
+                                     "kinematic_mps", "safety_pct", "progress_m")}
+                  for r in worst_scenes(records, gallery)],
+        "failures": [{"job_id": r["job_id"], "error": r["error"]}
+                     for r in records if r["status"] != "ok"],
+    }
+    return results, {"by_planner_attack": timing_rows, "crash_ablation": ablation_timing, **_timing(records)}

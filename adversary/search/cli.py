@@ -1,0 +1,66 @@
+"""The `adversary search` and `adversary search-report` subcommands (black-box scenario search)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from rasterize.errors import InputError
+from riskmap.infra.cli import positive_int
+
+
+def _print_summary(summary: dict, out: str) -> None:
+    share = summary["collision_share"]
+    print(f"{summary['collisions']} of {summary['evaluations']} evaluations collided "
+          f"({100 * share:.0f}%); {summary['evaluations'] - summary['feasible']} infeasible; "
+          f"failure diversity {summary['failure_diversity']}; results in {out}")
+    best = summary["least_altered_failure"]
+    if best:
+        print(f"least-altered failure (alteration {best['alteration']:.3f}): {best['description']}")
+
+
+def _run_search(args: argparse.Namespace) -> int:
+    from adversary.search.run import SearchConfig, search
+
+    config = SearchConfig(planner=args.planner, template=args.template, algorithm=args.algorithm,
+                          pop=args.pop, gen=args.gen, seed=args.seed, episode_s=args.episode_s,
+                          workers=args.workers)
+    _print_summary(search(config, Path(args.out), resume=args.resume, progress=not args.quiet,
+                          backend=args.backend, address=args.address), args.out)
+    return 0
+
+
+def _run_report(args: argparse.Namespace) -> int:
+    from adversary.search.report import write_report
+
+    if not (Path(args.out) / "run.json").exists():
+        raise InputError(f"--out {args.out} holds no search run (no run.json); run `adversary search`")
+    _print_summary(write_report(Path(args.out), frames=not args.no_frames), args.out)
+    return 0
+
+
+def add_parsers(subparsers) -> None:
+    from adversary.search.run import ALGORITHMS
+    from adversary.search.scenarios import TEMPLATES
+
+    p = subparsers.add_parser("search", help="NSGA-II or random search for scenarios where the ego "
+                                             "collides")
+    p.add_argument("--planner", required=True, help="planner SPEC: idm, cv, riskmap:PATH")
+    p.add_argument("--template", required=True, choices=sorted(TEMPLATES))
+    p.add_argument("--algorithm", default="nsga2", choices=ALGORITHMS)
+    p.add_argument("--pop", type=positive_int, default=20, help="evaluations per generation")
+    p.add_argument("--gen", type=positive_int, default=10, help="generations")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--episode-s", type=float, default=10.0, help="simulated seconds per evaluation")
+    p.add_argument("--workers", type=positive_int, default=1, help="evaluation processes")
+    p.add_argument("--backend", default="local", choices=("local", "ray"),
+                   help="local process pool, or Ray tasks (pip install 'riskmap-toolkit[ray]')")
+    p.add_argument("--address", default=None, help="Ray cluster address (default: a local Ray)")
+    p.add_argument("--out", required=True, help="directory for evaluations, summary and figures")
+    p.add_argument("--resume", action="store_true", help="continue a run in --out")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=_run_search)
+    p = subparsers.add_parser("search-report", help="rebuild the summary and figures of a search run")
+    p.add_argument("--out", required=True, help="directory of a search run")
+    p.add_argument("--no-frames", action="store_true", help="skip replaying the best failure")
+    p.set_defaults(func=_run_report)

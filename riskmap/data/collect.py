@@ -1,0 +1,224 @@
+"""Demonstrations from highway-env: the ego is driven by IDM + MOBIL (the "human").
+
+Each episode: reset the env with a seed derived from (seed, episode), replace the ego by an
+IDM/MOBIL vehicle with its own driver parameters (desired speed, time gap, politeness), step the
+road at `record_hz`, record every vehicle, drop vehicles far from the ego (they cannot reach the
+scene and they cost time), then cut training windows (history + future at `window_dt_s`) and
+write them as one shard per episode, atomically. `--resume` skips the episodes already written.
+"""
+
+from __future__ import annotations
+
+import json
+import multiprocessing as mp
+import shutil
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from rasterize.config import FAMILY_EXTENTS, RasterConfig, family_of_env
+from rasterize.errors import InputError
+from rasterize.scene_io import pack_scenes
+from riskmap.infra.atomic import write_json, write_npz
+from riskmap.infra.provenance import provenance
+from riskmap.sim.episode import FAMILY_SETUPS, Episode, FamilySetup, make_env
+
+FORMAT_VERSION = 2
+SHARD_DIR = "shards"
+MANIFEST = "manifest.json"
+INDEX = "index.json"
+
+
+@dataclass(frozen=True)
+class CollectConfig:
+    """Everything that determines a dataset. Times in seconds, distances in metres."""
+
+    env_id: str
+    episodes: int
+    seed: int = 0
+    record_hz: int = 10
+    history_s: float = 2.0
+    future_s: float = 6.0
+    window_dt_s: float = 0.5
+    window_stride_s: float = 1.0
+    crash_margin_s: float = 2.0        # drop windows whose future ends this close to an ego crash
+    scene_radius_m: float = 120.0
+    max_agents: int = 32
+    raster: RasterConfig | None = None
+
+    def __post_init__(self) -> None:
+        family = family_of_env(self.env_id)
+        if not (isinstance(self.episodes, int) and self.episodes >= 1):
+            raise InputError(f"--episodes must be a positive integer, got {self.episodes!r}")
+        if self.raster is None:
+            object.__setattr__(self, "raster", RasterConfig(FAMILY_EXTENTS[family]))
+        stride = self.record_hz * self.window_dt_s
+        if abs(stride - round(stride)) > 1e-9:
+            raise InputError(f"window_dt_s={self.window_dt_s} must be a multiple of 1/record_hz")
+
+    @property
+    def family(self) -> str:
+        return family_of_env(self.env_id)
+
+    @property
+    def setup(self) -> FamilySetup:
+        return FAMILY_SETUPS[self.family]
+
+    def to_dict(self) -> dict:
+        data = asdict(self)
+        data["family"] = self.family
+        data["family_setup"] = asdict(self.setup)
+        data["format_version"] = FORMAT_VERSION
+        return data
+
+
+def run_episode(env, config: CollectConfig, episode: int):
+    """Simulate one episode with the IDM/MOBIL ego; returns (windows as Scenes, episode info)."""
+    run = Episode(env, config.env_id, config.seed, episode, config.record_hz)
+    while not run.done and run.time_s < config.setup.episode_s - 1e-9:
+        run.step()
+    recorder = run.recorder
+    stride = int(round(config.window_stride_s * config.record_hz))
+    first = int(round(config.history_s * config.record_hz))
+    last = recorder.num_steps - 1 - int(round(config.future_s * config.record_hz))
+    if run.crashed:  # a driver heading into a crash is no demonstration to learn from
+        last -= int(round(config.crash_margin_s * config.record_hz))
+    windows = [
+        recorder.scene(step, config.history_s, config.future_s, config.window_dt_s,
+                       config.scene_radius_m, config.max_agents, source=config.env_id)
+        for step in range(first, last + 1, stride)
+    ]
+    info = {"episode": episode, "seed": run.seed, "driver": run.driver, "windows": len(windows),
+            "simulated_s": run.time_s, "ego_crashed": run.crashed,
+            "ego_off_network": run.off_network}
+    return windows, info
+
+
+def shard_path(out: Path, episode: int) -> Path:
+    return out / SHARD_DIR / f"episode_{episode:06d}.npz"
+
+
+def write_episode_shard(out: Path, windows: list, info: dict) -> None:
+    arrays = pack_scenes(windows) if windows else {}
+    arrays["episode_info"] = np.frombuffer(json.dumps(info, sort_keys=True).encode(), np.uint8)
+    write_npz(shard_path(out, info["episode"]), arrays)
+
+
+def read_episode_info(path: Path) -> dict | None:
+    """The info of a finished shard, or None if it is missing or unreadable."""
+    try:
+        with np.load(path) as data:
+            return json.loads(bytes(data["episode_info"]).decode())
+    except Exception:  # noqa: BLE001 - any unreadable shard is simply redone
+        return None
+
+
+# --- worker processes: one env per process, reused across episodes -------------------------------
+
+_WORKER: dict = {}
+
+
+def _worker_init(config: CollectConfig, out: str) -> None:
+    import cv2
+
+    cv2.setNumThreads(1)
+    _WORKER["config"], _WORKER["out"] = config, Path(out)
+    _WORKER["env"] = make_env(config.env_id, config.record_hz)
+
+
+def _worker_episode(episode: int) -> dict:
+    windows, info = run_episode(_WORKER["env"], _WORKER["config"], episode)
+    write_episode_shard(_WORKER["out"], windows, info)
+    return info
+
+
+def _check_out_dir(out: Path, config: CollectConfig, resume: bool) -> None:
+    manifest = out / MANIFEST
+    if manifest.exists():
+        if not resume:
+            raise InputError(f"--out {out} already holds a dataset; pass --resume to continue it "
+                             "or choose another --out")
+        try:
+            previous = json.loads(manifest.read_text())["config"]
+        except (OSError, ValueError, KeyError):
+            raise InputError(f"{manifest} is unreadable; delete {out} and collect again") from None
+        mine = json.loads(json.dumps(config.to_dict()))
+        if {k: v for k, v in previous.items() if k != "episodes"} != \
+                {k: v for k, v in mine.items() if k != "episodes"}:
+            raise InputError(f"--out {out} was collected with a different configuration; "
+                             "resume with the same --env/--seed or choose another --out")
+    elif out.exists() and any(out.iterdir()):
+        raise InputError(f"--out {out} exists and is not a dataset directory; choose another --out")
+
+
+def write_index_and_manifest(out: Path, config: CollectConfig, infos: list[dict],
+                             elapsed_s: float) -> dict:
+    infos = sorted(infos, key=lambda i: i["episode"])
+    index = {"shards": [{"file": f"{SHARD_DIR}/{shard_path(out, i['episode']).name}",
+                         "episode": i["episode"], "windows": i["windows"]} for i in infos]}
+    manifest = {
+        "config": config.to_dict(),
+        "seed": config.seed,
+        **provenance(),
+        "counts": {
+            "episodes": len(infos),
+            "windows": int(sum(i["windows"] for i in infos)),
+            "ego_crashes": int(sum(i["ego_crashed"] for i in infos)),
+            "ego_off_network": int(sum(i["ego_off_network"] for i in infos)),
+            "simulated_s": float(sum(i["simulated_s"] for i in infos)),
+        },
+        "last_run_elapsed_s": round(elapsed_s, 3),
+    }
+    write_json(out / INDEX, index)
+    write_json(out / MANIFEST, manifest)
+    return manifest
+
+
+def collect(config: CollectConfig, out: Path, workers: int = 1, resume: bool = False,
+            progress: bool = True) -> dict:
+    """Collect `config.episodes` episodes into `out`; returns the manifest."""
+    from tqdm import tqdm
+
+    out = Path(out)
+    if not (isinstance(workers, int) and workers >= 1):
+        raise InputError(f"--workers must be a positive integer, got {workers!r}")
+    _check_out_dir(out, config, resume)
+    created = not out.exists()
+    start = time.perf_counter()
+    done = {}
+    for episode in range(config.episodes):
+        info = read_episode_info(shard_path(out, episode)) if resume else None
+        if info is not None:
+            done[episode] = info
+    todo = [e for e in range(config.episodes) if e not in done]
+    infos = list(done.values())
+    (out / SHARD_DIR).mkdir(parents=True, exist_ok=True)
+    # Write the manifest first so that an interrupted run is recognised by --resume.
+    write_index_and_manifest(out, config, infos, 0.0)
+    bar = tqdm(total=config.episodes, initial=len(done), unit="episode", disable=not progress,
+               desc=f"collect {config.env_id}")
+    try:
+        if workers == 1 or len(todo) <= 1:
+            _worker_init(config, str(out))
+            results = map(_worker_episode, todo)
+            pool = None
+        else:
+            pool = mp.get_context("fork").Pool(min(workers, len(todo)), _worker_init,
+                                               (config, str(out)))
+            results = pool.imap_unordered(_worker_episode, todo)
+        for info in results:
+            infos.append(info)
+            bar.update(1)
+            bar.set_postfix(windows=sum(i["windows"] for i in infos))
+        if pool is not None:
+            pool.close()
+            pool.join()
+    except BaseException:
+        if created and not any((out / SHARD_DIR).iterdir()):
+            shutil.rmtree(out, ignore_errors=True)
+        raise
+    finally:
+        bar.close()
+    return write_index_and_manifest(out, config, infos, time.perf_counter() - start)

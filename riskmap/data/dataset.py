@@ -1,0 +1,190 @@
+"""The demonstration dataset: shards written by `riskmap collect`, served as training samples.
+
+A sample (grid G = resolution, C = raster channels):
+    raster       float32 [C, 200, 200]  BEV raster in [0, 1]
+    motion       float32 [3, G, G]      ego speed, cell x / length, cell y / width
+    demo         float32 [2, G, G]      D_demo: path visit counts, goal one-hot
+    uncertainty  float32 [G, G]         ado agents' positional uncertainty
+    goal_map     float32 [G, G]         Gaussian around the goal cell
+    goal_cell    int64   [2]            (row, col) of the goal: by default the route rule's
+                                        (`rasterize.highway.RouteRule`, as in closed loop), or
+                                        the demonstration's last in-grid cell (goal="demo")
+    start_cell   int64   [2]            the ego's (row, col)
+    demo_path    int64   [3G, 2]        the demonstration's cell path, padded with -1
+    future       float32 [F, 2]         the ego's future waypoints, ego frame, metres
+"""
+
+from __future__ import annotations
+
+import json
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+from rasterize.config import RasterConfig
+from rasterize.errors import InputError
+from rasterize.frames import ego_from_world, ego_pose
+from rasterize.maps import (
+    demo_path_cells,
+    goal_map,
+    motion_features,
+    route_goal_cell,
+    start_cell,
+    uncertainty_map,
+    visitation_from_path,
+)
+from rasterize.raster import rasterize_scene
+from rasterize.scene import Scene
+from rasterize.scene_io import check_packed, unpack_scene
+from riskmap.data.collect import FORMAT_VERSION, INDEX, MANIFEST
+
+try:  # torch is optional for reading scenes, required for DataLoader use
+    from torch.utils.data import Dataset as _TorchDataset
+except ImportError:  # pragma: no cover
+    _TorchDataset = object
+
+
+def load_manifest(root: Path) -> dict:
+    root = Path(root)
+    path = root / MANIFEST
+    if not path.exists():
+        raise InputError(f"--data {root} is not a dataset (no {MANIFEST}); "
+                         "create one with `riskmap collect`")
+    try:
+        return json.loads(path.read_text())
+    except ValueError:
+        raise InputError(f"{path} is not valid JSON; collect the dataset again") from None
+
+
+def _load_shard(path: Path) -> dict[str, np.ndarray]:
+    if not path.exists():
+        raise InputError(f"shard {path} listed in the index is missing; "
+                         "run `riskmap collect ... --resume` to rebuild it")
+    try:
+        with np.load(path) as data:
+            arrays = {k: data[k] for k in data.files}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
+        raise InputError(f"shard {path} is corrupt or truncated ({type(err).__name__}); delete it "
+                         "and run `riskmap collect ... --resume` to write it again") from None
+    return arrays
+
+
+class DemoDataset(_TorchDataset):
+    """Training windows of a collected dataset (see the module docstring for a sample's keys).
+
+    `raster`: the raster configuration the caller needs (for instance a checkpoint's); it must
+    equal the dataset's, since the extent was chosen with the scenario family at collection.
+    """
+
+    def __init__(self, root: str | Path, resolution: int = 50, raster: RasterConfig | None = None,
+                 sigma_x: float = 0.5, sigma_y: float = 1.5, goal_variance: float = 5.0,
+                 goal: str = "route"):
+        if goal not in ("route", "demo"):
+            raise InputError(f"goal must be 'route' or 'demo', got {goal!r}")
+        self.goal_source = goal
+        self.root = Path(root)
+        self.manifest = load_manifest(self.root)
+        version = self.manifest.get("config", {}).get("format_version")
+        if version != FORMAT_VERSION:
+            raise InputError(f"dataset {self.root} has format version {version}, this toolkit reads "
+                             f"version {FORMAT_VERSION}; collect it again with `riskmap collect`")
+        collected = RasterConfig.from_dict(self.manifest["config"]["raster"])
+        if raster is not None and raster != collected:
+            raise InputError(
+                f"dataset {self.root} was collected with raster config {collected} but {raster} "
+                "is required; collect a dataset with the matching extent or use a matching model"
+            )
+        self.raster_config = collected
+        self.grid = collected.grid(resolution)
+        self.sigma_x, self.sigma_y, self.goal_variance = sigma_x, sigma_y, goal_variance
+        self.source = self.manifest["config"]["env_id"]
+        try:
+            index = json.loads((self.root / INDEX).read_text())
+        except (OSError, ValueError):
+            raise InputError(f"{self.root / INDEX} is missing or unreadable; run "
+                             "`riskmap collect ... --resume` to rebuild it") from None
+        self._shards: list[dict[str, np.ndarray]] = []
+        self._items: list[tuple[int, int]] = []
+        for entry in index["shards"]:
+            if entry["windows"] == 0:
+                continue
+            path = self.root / entry["file"]
+            arrays = _load_shard(path)
+            count = check_packed(arrays, str(path))
+            if count != entry["windows"]:
+                raise InputError(f"shard {path} holds {count} windows but the index says "
+                                 f"{entry['windows']}; run `riskmap collect ... --resume`")
+            self._items.extend((len(self._shards), i) for i in range(count))
+            self._shards.append(arrays)
+        if not self._items:
+            raise InputError(f"dataset {self.root} holds no windows; collect more episodes")
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    def episode_of(self, index: int) -> int:
+        """The episode (shard) a window comes from."""
+        return self._items[index][0]
+
+    def scene(self, index: int) -> Scene:
+        shard, local = self._items[index]
+        return unpack_scene(self._shards[shard], local, source=self.source)
+
+    def __getitem__(self, index: int) -> dict:
+        return self.sample(self.scene(index))
+
+    def sample(self, scene: Scene) -> dict:
+        """The training sample (see the module docstring) of a scene with a recorded future."""
+        import torch
+
+        origin, heading = ego_pose(scene)
+        cells = demo_path_cells(scene, self.grid)
+        counts, goal = visitation_from_path(cells, self.grid)
+        path = np.full((3 * self.grid.rows, 2), -1, dtype=np.int64)
+        cells = cells[: len(path)]
+        path[: len(cells)] = cells
+        if self.goal_source == "route":
+            goal_cell = route_goal_cell(scene, self.grid)
+        else:
+            goal_cell = tuple(int(v) for v in np.argwhere(goal)[0])
+        sample = {
+            "raster": rasterize_scene(scene, self.raster_config).astype(np.float32) / 255.0,
+            "motion": motion_features(scene, self.grid),
+            "demo": np.stack([counts, goal]),
+            "uncertainty": uncertainty_map(scene, self.grid, self.sigma_x, self.sigma_y),
+            "goal_map": goal_map(goal_cell, self.grid, self.goal_variance),
+            "goal_cell": np.array(goal_cell, dtype=np.int64),
+            "start_cell": np.array(start_cell(self.grid), dtype=np.int64),
+            "demo_path": path,
+            "future": ego_from_world(scene.ego_future_xy(), origin, heading).astype(np.float32),
+        }
+        return {k: torch.from_numpy(np.ascontiguousarray(v)) for k, v in sample.items()}
+
+
+class PerturbedEgo(_TorchDataset):
+    """Training-time augmentation: with probability `probability` the ego's current pose is turned
+    by up to ±`max_heading_deg` and shifted up to ±`max_lateral_m` sideways (uniformly), its
+    recorded future kept (see `Scene.with_ego_perturbed`). Draws depend only on (seed, epoch,
+    index), so a resumed run sees the same samples."""
+
+    def __init__(self, base: DemoDataset, seed: int = 0, probability: float = 0.5,
+                 max_heading_deg: float = 10.0, max_lateral_m: float = 1.0):
+        self.base, self.seed, self.probability = base, seed, probability
+        self.max_heading = np.deg2rad(max_heading_deg)
+        self.max_lateral = max_lateral_m
+        self.epoch = 0
+
+    def set_epoch(self, epoch: int) -> None:
+        self.epoch = epoch
+
+    def __len__(self) -> int:
+        return len(self.base)
+
+    def __getitem__(self, index: int) -> dict:
+        scene = self.base.scene(index)
+        rng = np.random.default_rng([self.seed, self.epoch, index])
+        if rng.random() < self.probability:
+            scene = scene.with_ego_perturbed(rng.uniform(-self.max_heading, self.max_heading),
+                                             rng.uniform(-self.max_lateral, self.max_lateral))
+        return self.base.sample(scene)

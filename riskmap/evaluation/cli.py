@@ -1,0 +1,85 @@
+"""`riskmap drive` (closed-loop episodes) and `riskmap evaluate` (the planner benchmark)."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from rasterize.errors import InputError
+from riskmap.infra.cli import positive_int
+
+
+def _cmd_drive(args: argparse.Namespace) -> int:
+    from riskmap.evaluation.drive import drive
+    from riskmap.sim.rollout import DriveConfig
+
+    if bool(args.checkpoint) == bool(args.planner):
+        raise InputError("pass exactly one of --checkpoint CKPT or --planner SPEC")
+    spec = args.planner or f"riskmap:{args.checkpoint}"
+    config = DriveConfig(env_id=args.env, episodes=args.episodes, seed=args.seed)
+    summary = drive(config, spec, Path(args.out), resume=args.resume, frames=args.frames,
+                    progress=not args.quiet, goal_variance=args.goal_variance)["summary"]
+    print(f"{spec} on {args.env}: {summary['episodes']} episodes, collision rate "
+          f"{summary['collision_rate']:.2f}, distance {summary['distance_m']:.0f} m, "
+          f"min gap {summary['min_gap_m']:.1f} m -> {Path(args.out) / 'summary.json'}")
+    return 0
+
+
+def _cmd_evaluate(args: argparse.Namespace) -> int:
+    from riskmap.evaluation.evaluate import EvalConfig, evaluate
+
+    planners = tuple(p.strip() for p in args.planners.split(",") if p.strip())
+    if args.commonroad:
+        from riskmap.evaluation.evaluate_commonroad import evaluate_commonroad
+
+        if args.mode != "log" or args.env or args.episodes:
+            raise InputError("--commonroad evaluates recorded vehicles in log mode: drop --env, "
+                             "--episodes and --mode reactive")
+        evaluate_commonroad(args.commonroad, planners, Path(args.out), seed=args.seed,
+                            resume=args.resume, progress=not args.quiet)
+        print((Path(args.out) / "table.md").read_text(), end="")
+        return 0
+    if not args.env or not args.episodes:
+        raise InputError("evaluate needs --env ENV and --episodes N (or --commonroad FILES)")
+    config = EvalConfig(env_id=args.env, planners=planners, episodes=args.episodes, seed=args.seed,
+                        mode=args.mode, episode_s=args.episode_s)
+    evaluate(config, Path(args.out), workers=args.workers, resume=args.resume,
+             progress=not args.quiet)
+    print((Path(args.out) / "table.md").read_text(), end="")
+    return 0
+
+
+def add_parsers(sub) -> None:
+    p = sub.add_parser("drive", help="drive closed-loop episodes with a planner")
+    p.add_argument("--checkpoint", help="risk-map planner checkpoint (same as --planner riskmap:CKPT)")
+    p.add_argument("--planner", help="planner SPEC: idm, cv or riskmap:PATH")
+    p.add_argument("--env", required=True)
+    p.add_argument("--episodes", type=positive_int, required=True)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", required=True)
+    p.add_argument("--frames", action="store_true", help="write a PNG per replan")
+    p.add_argument("--goal-variance", type=float, default=None,
+                   help="cells²; planning-time goal variance of a risk-map planner (default: the "
+                        "checkpoint's)")
+    p.add_argument("--resume", action="store_true")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=_cmd_drive)
+
+    p = sub.add_parser("evaluate", help="closed-loop benchmark of planners (Table I metrics)")
+    p.add_argument("--planners", required=True,
+                   help="comma-separated planner SPECs: idm, replay, cv, riskmap:PATH, cnn:PATH, "
+                        "cnn_lstm:PATH, rvsg:PATH")
+    p.add_argument("--env", help="highway-env id (simulated scenes)")
+    p.add_argument("--episodes", type=positive_int, help="episodes (simulated scenes)")
+    p.add_argument("--commonroad", nargs="+", metavar="DIR_OR_FILE",
+                   help="evaluate on recorded vehicles of CommonRoad files instead (log mode)")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--mode", choices=("log", "reactive"), default="log",
+                   help="log: other vehicles replay the human's record; reactive: IDM/MOBIL traffic")
+    p.add_argument("--episode-s", type=float, default=None,
+                   help="simulated seconds per episode (default: the family's length)")
+    p.add_argument("--out", required=True)
+    p.add_argument("--workers", type=positive_int, default=1, help="processes (default 1)")
+    p.add_argument("--resume", action="store_true")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=_cmd_evaluate)

@@ -1,0 +1,78 @@
+"""`riskmap drive`: closed-loop episodes in highway-env with any planner driving the ego.
+
+The traffic of episode e under seed S is exactly the traffic the demonstrations met (same env
+seed, same human driver parameters); the rollout is `riskmap.sim.rollout.drive_episode`.
+Per episode: OUT/episodes/episode_NNNNNN.json (atomic); OUT/summary.json at the end.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from rasterize.errors import InputError
+from riskmap.figures.panels import plan_frame_writer
+from riskmap.infra.atomic import write_json
+from riskmap.infra.provenance import provenance
+from riskmap.registry import make_planner
+from riskmap.sim.episode import make_env
+from riskmap.sim.rollout import DriveConfig, DriveHooks, drive_episode
+
+
+def summarise(records: list[dict]) -> dict:
+    def mean(key):
+        values = [r[key] for r in records if r[key] is not None and np.isfinite(r[key])]
+        return float(np.mean(values)) if values else None
+
+    return {
+        "episodes": len(records),
+        "collision_rate": mean("collided"),
+        "off_road_rate": mean("off_road"),
+        "distance_m": mean("distance_m"),
+        "mean_speed_mps": mean("mean_speed_mps"),
+        "min_gap_m": mean("min_gap_m"),
+        "plan_ms_median": float(np.median([r["plan_ms_median"] for r in records
+                                           if r["plan_ms_median"] is not None]))
+        if any(r["plan_ms_median"] is not None for r in records) else None,
+    }
+
+
+def drive(config: DriveConfig, planner_spec: str, out: Path, resume: bool = False,
+          frames: bool = False, progress: bool = True, goal_variance: float | None = None) -> dict:
+    from tqdm import tqdm
+
+    out = Path(out)
+    planner = make_planner(planner_spec, seed=config.seed, goal_variance=goal_variance)
+    episodes_dir = out / "episodes"
+    if episodes_dir.exists() and any(episodes_dir.iterdir()) and not resume:
+        raise InputError(f"--out {out} already holds driven episodes; pass --resume to continue "
+                         "or choose another --out")
+    meta = {"config": asdict(config), "planner": planner_spec, **provenance()}
+    if goal_variance is not None:
+        meta["goal_variance"] = goal_variance
+    if resume and (out / "run.json").exists():
+        previous = json.loads((out / "run.json").read_text())
+        if previous["config"] | {"episodes": config.episodes} != meta["config"] or \
+                previous["planner"] != planner_spec or \
+                previous.get("goal_variance") != meta.get("goal_variance"):
+            raise InputError(f"--out {out} was driven with other settings; choose another --out")
+    write_json(out / "run.json", meta)
+    env = make_env(config.env_id, config.control_hz)
+    records = []
+    for episode in tqdm(range(config.episodes), disable=not progress, desc=f"drive {planner_spec}"):
+        path = episodes_dir / f"episode_{episode:06d}.json"
+        if resume and path.exists():
+            records.append(json.loads(path.read_text()))
+            continue
+        hooks = DriveHooks(on_plan=plan_frame_writer(
+            out / "frames", planner, f"episode_{episode:06d}", f"{config.env_id} episode {episode}")
+            if frames else None)
+        record = drive_episode(env, planner, config, episode, hooks)
+        write_json(path, record)
+        records.append(record)
+    summary = {**meta, "summary": summarise(records)}
+    write_json(out / "summary.json", summary)
+    return summary

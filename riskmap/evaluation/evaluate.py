@@ -1,0 +1,307 @@
+"""`riskmap evaluate`: the planner benchmark (planner paper Table I) in closed loop.
+
+For every episode e of (env, seed) the IDM/MOBIL human is driven first and recorded
+(OUT/logs/episode_NNNNNN.npz). Then every planner drives the ego of that same episode from the
+human's start, along the human's route:
+
+    mode log        the other vehicles replay the human's record with synchronised time
+                    (`riskmap.sim.log_replay`); the episode lasts as long as the record
+    mode reactive   the other vehicles are the simulator's IDM/MOBIL drivers and react
+
+`idm` (Human) is the record itself, so its ADE and goal error are 0 by construction; `replay`
+plays the record back through the harness (log mode only). Metrics per episode
+(`riskmap.sim.metrics`) go to OUT/episodes/<planner>/episode_NNNNNN.json as each finishes; at the end
+OUT/episodes.csv (one row per planner and episode), OUT/results.json (mean and 90th percentile
+over episodes) and OUT/table.md. `--resume` skips every file already written.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import re
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict, dataclass, field
+from multiprocessing import get_context
+from pathlib import Path
+
+import numpy as np
+
+from rasterize.config import family_of_env
+from rasterize.errors import InputError
+from riskmap.infra.atomic import atomic_write, write_json
+from riskmap.infra.provenance import provenance
+from riskmap.sim.episode import FAMILY_SETUPS
+from riskmap.sim.metrics import (
+    SafetyConfig,
+    ade_m,
+    dangerous_encounters,
+    goal_error_m,
+    mean_jerk_mps3,
+    path_length_m,
+    safety_pct,
+    summarise_metric,
+)
+
+MODES = ("log", "reactive")
+# Per-episode values summarised as mean and 90th percentile over episodes.
+METRICS = ("safety_pct", "ade_m", "goal_error_m", "progress_m", "jerk_mps3", "plan_ms_mean")
+RATES = ("collided", "off_road")
+CSV_FIELDS = ("planner", "label", "episode", "mode", "collided", "off_road", "safety_pct", "dangerous",
+              "encounters", "ade_m", "goal_error_m", "progress_m", "jerk_mps3", "simulated_s",
+              "plan_ms_mean", "plan_ms_p90", "plan_calls")
+
+
+@dataclass(frozen=True)
+class EvalConfig:
+    """One benchmark run. Times in seconds, rates in Hz."""
+
+    env_id: str
+    planners: tuple[str, ...]
+    episodes: int
+    seed: int = 0
+    mode: str = "log"
+    control_hz: int = 10
+    replan_hz: int = 2
+    episode_s: float | None = None        # default: the family's episode length
+    safety: SafetyConfig = field(default_factory=SafetyConfig)
+
+    def __post_init__(self) -> None:
+        family = family_of_env(self.env_id)
+        if self.mode not in MODES:
+            raise InputError(f"--mode {self.mode!r} is unknown; use log or reactive")
+        if self.episodes < 1:
+            raise InputError("--episodes must be at least 1")
+        if not self.planners or len(set(self.planners)) != len(self.planners):
+            raise InputError(f"--planners {','.join(self.planners)!r}: give each planner SPEC once")
+        if self.mode == "reactive" and "replay" in self.planners:
+            raise InputError("planner `replay` plays back the record, which reactive traffic no longer "
+                             "follows; use it with --mode log only")
+        if self.episode_s is None:
+            object.__setattr__(self, "episode_s", FAMILY_SETUPS[family].episode_s)
+        if not self.episode_s > 0:
+            raise InputError(f"--episode-s must be positive seconds, got {self.episode_s}")
+
+
+def planner_label(spec: str) -> str:
+    """The Table I name of a planner SPEC."""
+    kind = spec.partition(":")[0].replace("-", "_")
+    return {"idm": "Human", "replay": "Replay", "cv": "CV", "riskmap": "Risk-aware (ours)",
+            "cnn": "CNN", "cnn_lstm": "CNN-LSTM", "rvsg": "RvS-G"}.get(kind, spec)
+
+
+def planner_slug(spec: str) -> str:
+    return re.sub(r"[^A-Za-z0-9]+", "_", spec).strip("_")
+
+
+def _log_path(out: Path, episode: int) -> Path:
+    return out / "logs" / f"episode_{episode:06d}.npz"
+
+
+def _result_path(out: Path, spec: str, episode: int) -> Path:
+    return out / "episodes" / planner_slug(spec) / f"episode_{episode:06d}.json"
+
+
+def trajectory_metrics(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, ego_id: int,
+                       dt_s: float, human_xy: np.ndarray, safety: SafetyConfig) -> dict:
+    """Metrics of one driven episode from its record (states [A, S, 6], valid [A, S], sizes [A, 2])."""
+    # A recorder lists an agent once more for each vehicle that took over its recording (they
+    # never hold states); only the first len(sizes) agents are real.
+    states, valid = states[: len(sizes)], valid[: len(sizes)]
+    ego = states[ego_id][valid[ego_id]]
+    others = np.delete(np.arange(states.shape[0]), ego_id)
+    dangerous, encounters = dangerous_encounters(ego, sizes[ego_id], states[others], valid[others],
+                                                 sizes[others], safety)
+    return {"ade_m": ade_m(ego[:, :2], human_xy), "goal_error_m": goal_error_m(ego[:, :2], human_xy),
+            "progress_m": path_length_m(ego[:, :2]), "jerk_mps3": mean_jerk_mps3(ego[:, :2], dt_s),
+            "dangerous": dangerous, "encounters": encounters,
+            "safety_pct": safety_pct(dangerous, encounters),
+            "simulated_s": round((len(ego) - 1) * dt_s, 3)}
+
+
+# One env and one instance of each planner per process, built on first use.
+_CACHE: dict = {}
+
+
+def _env(env_id: str, rate_hz: int):
+    key = ("env", env_id, rate_hz)
+    if key not in _CACHE:
+        from riskmap.sim.episode import make_env
+
+        _CACHE[key] = make_env(env_id, rate_hz)
+    return _CACHE[key]
+
+
+def _planner(spec: str, seed: int):
+    key = ("planner", spec, seed)
+    if key not in _CACHE:
+        import torch
+
+        from riskmap.registry import make_planner
+
+        torch.set_num_threads(1)
+        _CACHE[key] = make_planner(spec, seed=seed)
+    return _CACHE[key]
+
+
+def record_task(config: EvalConfig, out: Path, episode: int) -> None:
+    """Record the human's episode unless it is on disk."""
+    from riskmap.sim.log_replay import record_human_episode
+
+    path = _log_path(out, episode)
+    if path.exists():
+        return
+    log = record_human_episode(_env(config.env_id, config.control_hz), config.env_id, config.seed,
+                               episode, config.control_hz, config.episode_s)
+    log.save(path)
+
+
+def planner_task(config: EvalConfig, out: Path, spec: str, episode: int) -> dict:
+    """Drive (or, for `idm`, read) one episode; returns its record of metrics."""
+    from riskmap.sim.episode import Episode
+    from riskmap.sim.log_replay import HumanLog, LogReplayEpisode, ReplayPlanner
+    from riskmap.sim.rollout import DriveConfig, drive_episode
+
+    log = HumanLog.load(_log_path(out, episode))
+    human_xy = log.ego_xy()
+    base = {"planner": spec, "label": planner_label(spec), "episode": episode, "mode": config.mode}
+    if spec == "idm":
+        metrics = trajectory_metrics(log.states, log.valid, log.sizes, log.ego_id, log.dt_s, human_xy,
+                                     config.safety)
+        return {**base, **metrics, "collided": log.crashed, "off_road": log.off_road,
+                "plan_ms_mean": None, "plan_ms_p90": None, "plan_calls": 0}
+    env = _env(config.env_id, config.control_hz)
+    planner = _planner(spec, config.seed)
+    replay = isinstance(planner, ReplayPlanner)
+    if replay:
+        planner.set_log(log)
+    if config.mode == "log":
+        run = LogReplayEpisode(env, config.env_id, config.seed, episode, log, config.control_hz,
+                               replay_ego=replay)
+    else:
+        run = Episode(env, config.env_id, config.seed, episode, config.control_hz)
+    drive_config = DriveConfig(config.env_id, config.episodes, config.seed, config.control_hz,
+                               config.replan_hz, config.episode_s)
+    record = drive_episode(env, planner, drive_config, episode, run=run)
+    states, valid, sizes, _ = run.recorder.arrays()
+    metrics = trajectory_metrics(states, valid, sizes, run.recorder.ego_id, run.dt, human_xy,
+                                 config.safety)
+    return {**base, **metrics, "collided": record["collided"], "off_road": record["off_road"],
+            "plan_ms_mean": record["plan_ms_mean"], "plan_ms_p90": record["plan_ms_p90"],
+            "plan_calls": record["plan_calls"]}
+
+
+def _run_planner_task(config: EvalConfig, out: Path, spec: str, episode: int) -> tuple[str, int, dict]:
+    record = planner_task(config, out, spec, episode)
+    write_json(_result_path(out, spec, episode), record)
+    return spec, episode, record
+
+
+def summarise(config: EvalConfig, records: list[dict]) -> dict:
+    """Per planner: mean and 90th percentile over episodes, rates, pooled Safety %."""
+    table = {}
+    for spec in config.planners:
+        rows = [r for r in records if r["planner"] == spec]
+        if not rows:
+            continue
+        entry = {"label": planner_label(spec), "episodes": len(rows)}
+        for key in METRICS:
+            entry[key] = summarise_metric([r[key] for r in rows])
+        for key in RATES:
+            entry[f"{key}_rate"] = float(np.mean([bool(r[key]) for r in rows]))
+        dangerous = sum(r["dangerous"] for r in rows)
+        encounters = sum(r["encounters"] for r in rows)
+        entry["safety_pct_pooled"] = safety_pct(dangerous, encounters)
+        entry["encounters"] = encounters
+        table[spec] = entry
+    return table
+
+
+def _fmt(value, digits: int = 2) -> str:
+    return "–" if value is None else f"{value:.{digits}f}"
+
+
+def markdown_table(config: EvalConfig, table: dict) -> str:
+    lines = [(f"{config.env_id}, mode {config.mode}, seed {config.seed}: mean / 90th percentile over "
+             "episodes"), "",
+             ("| planner | episodes | Safety % | ADE (m) | Goal (m) | collisions | off-road | "
+             "progress (m) | jerk (m/s³) | plan ms/call |"),
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    for entry in table.values():
+        def pair(key, digits=2, entry=entry):
+            return f"{_fmt(entry[key]['mean'], digits)} / {_fmt(entry[key]['p90'], digits)}"
+
+        lines.append(
+            f"| {entry['label']} | {entry['episodes']} | {pair('safety_pct', 1)} | {pair('ade_m')} | "
+            f"{pair('goal_error_m')} | {100 * entry['collided_rate']:.0f}% | "
+            f"{100 * entry['off_road_rate']:.0f}% | {pair('progress_m', 0)} | {pair('jerk_mps3')} | "
+            f"{pair('plan_ms_mean', 1)} |")
+    return "\n".join(lines) + "\n"
+
+
+def _check_out(config: EvalConfig, out: Path, resume: bool) -> dict:
+    meta = {"config": asdict(config), **provenance()}
+    run_json = out / "run.json"
+    if run_json.exists():
+        if not resume:
+            raise InputError(f"--out {out} already holds an evaluation; pass --resume to continue "
+                             "it or choose another --out")
+        previous = json.loads(run_json.read_text())["config"]
+        # More episodes or planners may be added on resume; nothing else may change.
+        fixed = {k: v for k, v in meta["config"].items() if k not in ("episodes", "planners")}
+        if {k: v for k, v in previous.items() if k in fixed} != fixed:
+            raise InputError(f"--out {out} was evaluated with other settings; resume with the same "
+                             "--env, --seed and --mode (only --episodes and --planners may change)")
+    write_json(run_json, meta)
+    return meta
+
+
+def evaluate(config: EvalConfig, out: Path, workers: int = 1, resume: bool = False,
+             progress: bool = True) -> dict:
+    """Run (or finish) the benchmark; returns results.json's content."""
+    from tqdm import tqdm
+
+    out = Path(out)
+    for spec in config.planners:   # fail on a bad SPEC before any work starts
+        if spec != "idm":
+            _planner(spec, config.seed)
+    meta = _check_out(config, out, resume)
+    todo_logs = [e for e in range(config.episodes) if not _log_path(out, e).exists()]
+    todo = [(s, e) for e in range(config.episodes) for s in config.planners
+            if not _result_path(out, s, e).exists()]
+    bar = tqdm(total=len(todo_logs) + len(todo), disable=not progress, desc=f"evaluate {config.env_id}")
+    if workers > 1:
+        with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:
+            for future in as_completed([pool.submit(record_task, config, out, e) for e in todo_logs]):
+                future.result()
+                bar.update()
+            for future in as_completed([pool.submit(_run_planner_task, config, out, s, e)
+                                        for s, e in todo]):
+                future.result()
+                bar.update()
+    else:
+        for e in todo_logs:
+            record_task(config, out, e)
+            bar.update()
+        for s, e in todo:
+            _run_planner_task(config, out, s, e)
+            bar.update()
+    bar.close()
+    records = [json.loads(_result_path(out, s, e).read_text())
+               for s in config.planners for e in range(config.episodes)]
+    atomic_write(out / "episodes.csv", lambda f: f.write(_csv_text(list(CSV_FIELDS), records).encode()))
+    table = summarise(config, records)
+    results = {**meta, "planners": table}
+    write_json(out / "results.json", results)
+    atomic_write(out / "table.md", lambda f: f.write(markdown_table(config, table).encode()))
+    return results
+
+
+def _csv_text(fields: list[str], records: list[dict]) -> str:
+    import io
+
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fields, extrasaction="ignore")
+    writer.writeheader()
+    writer.writerows(records)
+    return buffer.getvalue()

@@ -1,0 +1,120 @@
+"""`riskmap evaluate --mode log --commonroad DIR`: planners drive recorded human vehicles.
+
+Every vehicle that `riskmap collect --from-commonroad` makes a demonstrator (2 s of history and
+6 s of future in its record) is one episode: it is handed over to the planner 2 s into its
+record and driven to the end of it, among the other recorded vehicles replaying their tracks
+(`riskmap.sim.commonroad_replay`, a highway-env road built from the lanelets). Per planner and
+episode OUT/episodes/<planner>/<scenario>_<vehicle>.json (atomic; `--resume` skips finished
+ones), then OUT/results.json and OUT/table.md with means and 90th percentiles.
+
+`replay` is the recording itself, tracked by the same controller: the harness's error floor.
+Safety % is the simulated scenes' (`riskmap.sim.metrics`: share of encounters with a recorded vehicle
+within 30 m that are dangerously close), per episode, then mean and 90th percentile; the share
+of episodes without a collision or leaving the road is reported beside it.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+from rasterize.commonroad import RecordedTraffic, load_scenario
+from rasterize.errors import InputError
+from riskmap.data.collect_commonroad import CommonRoadCollectConfig, demonstrators, scenario_files
+from riskmap.evaluation.evaluate import planner_slug
+from riskmap.infra.atomic import write_json
+from riskmap.infra.provenance import provenance
+
+METRICS = ("safety_pct", "ade_m", "goal_error_m", "distance_m", "human_distance_m", "min_gap_m")
+
+
+def _planner(spec: str, traffic: RecordedTraffic, vehicle_id: int, seed: int, loaded: dict):
+    """The planner for one episode. `replay` is tied to its recording; any other SPEC is loaded
+    once into `loaded` and reused (each episode resets it, so results do not depend on order)."""
+    from riskmap.registry import make_planner
+    from riskmap.sim.commonroad_replay import RecordedFuturePlanner
+
+    if spec == "replay":
+        return RecordedFuturePlanner(traffic, vehicle_id)
+    if spec == "idm":
+        raise InputError("--planners idm: on recordings the human is the recording itself; "
+                         "use `replay`")
+    if spec not in loaded:
+        loaded[spec] = make_planner(spec, seed=seed)
+    return loaded[spec]
+
+
+def summarise(records: list[dict]) -> dict:
+    def stats(key):
+        values = np.array([min(r[key], 1e3) for r in records], dtype=float)
+        return {"mean": float(values.mean()), "p90": float(np.percentile(values, 90))}
+
+    return {"episodes": len(records),
+            "safe_episodes_pct": 100.0 * float(np.mean([not (r["collided"] or r["off_road"])
+                                                        for r in records])),
+            "collision_rate": float(np.mean([r["collided"] for r in records])),
+            "struck_from_behind": int(sum(bool(r["collision"]) and not r["collision"]["other_ahead"]
+                                          for r in records)),
+            "off_road_rate": float(np.mean([r["off_road"] for r in records])),
+            **{key: stats(key) for key in METRICS}}
+
+
+def markdown_table(results: dict) -> str:
+    lines = ["| planner | episodes | Safety % | safe episodes % | collisions (struck from behind) | "
+             "off-road | ADE (m) | goal error (m) | driven (m) | human (m) |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    for spec, s in results.items():
+        lines.append(
+            f"| {spec} | {s['episodes']} | {s['safety_pct']['mean']:.1f} / {s['safety_pct']['p90']:.1f} | "
+            f"{s['safe_episodes_pct']:.0f} | "
+            f"{100 * s['collision_rate']:.0f}% ({s['struck_from_behind']}) | "
+            f"{100 * s['off_road_rate']:.0f}% | {s['ade_m']['mean']:.2f} / {s['ade_m']['p90']:.2f} | "
+            f"{s['goal_error_m']['mean']:.2f} / {s['goal_error_m']['p90']:.2f} | "
+            f"{s['distance_m']['mean']:.1f} | {s['human_distance_m']['mean']:.1f} |")
+    return "\n".join(lines) + "\n"
+
+
+def evaluate_commonroad(recordings: list[str | Path], planners: tuple[str, ...], out: Path,
+                        seed: int = 0, resume: bool = False, progress: bool = True) -> dict:
+    """Run every planner on every recorded demonstrator; returns {planner: summary}."""
+    from tqdm import tqdm
+
+    from riskmap.sim.commonroad_replay import replay_commonroad_episode
+
+    out = Path(out)
+    files = scenario_files(recordings)
+    meta = {"recordings": [str(p) for p in files], "planners": list(planners), "seed": seed}
+    if (out / "run.json").exists():
+        if not resume:
+            raise InputError(f"--out {out} already holds an evaluation; pass --resume or choose "
+                             "another --out")
+        previous = json.loads((out / "run.json").read_text())
+        if {k: previous.get(k) for k in meta} != meta:
+            raise InputError(f"--out {out} was evaluated with other settings; choose another --out")
+    write_json(out / "run.json", {**meta, **provenance()})
+    config = CommonRoadCollectConfig(files=())
+    episodes = []
+    for path in files:
+        traffic = RecordedTraffic(load_scenario(path), path.stem)
+        episodes += [(traffic, int(traffic.ids[agent])) for agent, _ in demonstrators(traffic, config)]
+    if not episodes:
+        raise InputError(f"no recorded vehicle in {', '.join(map(str, recordings))} has 2 s of "
+                         "history and 6 s of future; nothing to evaluate")
+    records = {spec: [] for spec in planners}
+    loaded: dict = {}
+    for spec in planners:
+        for traffic, vehicle in tqdm(episodes, disable=not progress, desc=f"evaluate {spec}"):
+            path = out / "episodes" / planner_slug(spec) / f"{traffic.name}_{vehicle}.json"
+            if resume and path.exists():
+                records[spec].append(json.loads(path.read_text()))
+                continue
+            result = replay_commonroad_episode(traffic, vehicle,
+                                               _planner(spec, traffic, vehicle, seed, loaded))
+            write_json(path, result)
+            records[spec].append(result)
+    results = {spec: summarise(rs) for spec, rs in records.items()}
+    write_json(out / "results.json", {**meta, "results": results})
+    (out / "table.md").write_text(markdown_table(results))
+    return results

@@ -1,0 +1,42 @@
+"""`riskmap figures scenes|plans`: PNG figures of the data and of the planner."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from riskmap.infra.cli import positive_int
+
+
+def _cmd_figures_scenes(args: argparse.Namespace) -> int:
+    from riskmap.figures.panels import scene_figures
+
+    paths = scene_figures(Path(args.data), Path(args.out), args.count)
+    print(f"wrote {len(paths)} PNGs to {args.out}")
+    return 0
+
+
+def _cmd_figures_plans(args: argparse.Namespace) -> int:
+    from riskmap.figures.panels import plan_figures
+
+    paths = plan_figures(Path(args.checkpoint), Path(args.data), Path(args.out), args.count,
+                         args.seed)
+    print(f"wrote {len(paths)} PNGs to {args.out}")
+    return 0
+
+
+def add_parsers(sub) -> None:
+    p = sub.add_parser("figures", help="export PNG figures")
+    fig_sub = p.add_subparsers(dest="figure", required=True)
+    q = fig_sub.add_parser("scenes", help="BEV rasters with the future path overlaid")
+    q.add_argument("--data", required=True, help="dataset directory (from riskmap collect)")
+    q.add_argument("--out", required=True, help="directory for the PNGs")
+    q.add_argument("--count", type=positive_int, default=8)
+    q.set_defaults(func=_cmd_figures_scenes)
+    q = fig_sub.add_parser("plans", help="BEV | risk map | goal map | SVF | plan vs demo panels")
+    q.add_argument("--checkpoint", required=True, help="risk-map planner checkpoint")
+    q.add_argument("--data", required=True, help="dataset directory (same raster config)")
+    q.add_argument("--out", required=True, help="directory for the PNGs")
+    q.add_argument("--count", type=positive_int, default=6)
+    q.add_argument("--seed", type=int, default=0)
+    q.set_defaults(func=_cmd_figures_plans)

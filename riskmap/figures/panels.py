@@ -1,0 +1,186 @@
+"""PNG figures of scenes: the BEV raster as a colour picture with the future path on top."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from rasterize.config import RasterConfig
+from rasterize.frames import ego_from_world, ego_pose
+from rasterize.raster import CHANNEL_INDEX, rasterize_scene
+from rasterize.scene import Scene
+
+# Colours (RGB in [0, 1]) of the raster layers, painted in this order.
+_PALETTE = (
+    ("drivable", (0.36, 0.38, 0.42)),
+    ("lane_centre", (0.45, 0.60, 0.80)),
+    ("lane_dashed", (0.92, 0.92, 0.92)),
+    ("lane_solid", (1.00, 1.00, 1.00)),
+    ("agents_history", (0.30, 0.55, 1.00)),
+    ("ego_history", (1.00, 0.45, 0.35)),
+    ("agents", (0.15, 0.45, 1.00)),
+    ("ego", (0.95, 0.15, 0.10)),
+)
+_BACKGROUND = (0.10, 0.11, 0.12)
+
+
+def _save(fig, path: Path) -> Path:
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path)
+    plt.close(fig)
+    return path
+
+
+def raster_to_rgb(raster: np.ndarray) -> np.ndarray:
+    """uint8 [C, H, W] raster into an RGB float image [H, W, 3]: each layer alpha-blended on top."""
+    rgb = np.broadcast_to(np.array(_BACKGROUND), raster.shape[1:] + (3,)).copy()
+    for name, colour in _PALETTE:
+        alpha = raster[CHANNEL_INDEX[name]].astype(np.float64)[..., None] / 255.0
+        rgb = rgb * (1 - alpha) + np.array(colour) * alpha
+    return rgb
+
+
+def save_plan_png(scene: Scene, plan, config: RasterConfig, path: Path, title: str = "") -> Path:
+    """A closed-loop frame: the scene with the plan's 12 waypoints on top."""
+    return save_scene_png(scene, config, path, title, plan_waypoints=plan.waypoints)
+
+
+def save_scene_png(scene: Scene, config: RasterConfig, path: Path, title: str = "",
+                   plan_waypoints: np.ndarray | None = None) -> Path:
+    """Write the scene's raster with the ego's recorded future (if any) overlaid, labelled."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    ext = config.extent
+    fig, ax = plt.subplots(figsize=(6.2, 6.4), dpi=110)
+    ax.imshow(raster_to_rgb(rasterize_scene(scene, config)), interpolation="nearest",
+              extent=(ext.left_m, -ext.right_m, -ext.back_m, ext.front_m), aspect="auto")
+    handles = [Patch(color=c, label=n.replace("_", " ")) for n, c in _PALETTE if n != "lane_centre"]
+    if scene.num_future_steps and scene.valid[scene.ego_index, scene.current_index + 1:].all():
+        origin, heading = ego_pose(scene)
+        future = ego_from_world(scene.ego_future_xy(), origin, heading)
+        path_xy = np.concatenate([[[0.0, 0.0]], future])
+        ax.plot(path_xy[:, 1], path_xy[:, 0], "-", color="#3ddc84", lw=1.6)
+        ax.plot(future[:, 1], future[:, 0], "o", color="#3ddc84", ms=3.5)
+        handles.append(Line2D([], [], color="#3ddc84", marker="o", ms=3.5,
+                              label=f"future {scene.num_future_steps * scene.dt:.0f} s"))
+    if scene.route_xy is not None:
+        origin, heading = ego_pose(scene)
+        route = ego_from_world(scene.route_xy, origin, heading)
+        ax.plot(route[:, 1], route[:, 0], "--", color="#ffd43b", lw=1.2)
+        ax.plot(route[-1, 1], route[-1, 0], "*", color="#ffd43b", ms=11, mec="black", mew=0.5)
+        handles.append(Line2D([], [], color="#ffd43b", ls="--", marker="*", ms=8,
+                              label="route to goal"))
+    if plan_waypoints is not None:
+        path_xy = np.concatenate([[[0.0, 0.0]], plan_waypoints])
+        ax.plot(path_xy[:, 1], path_xy[:, 0], "-o", color="#ff66ff", lw=1.4, ms=3)
+        handles.append(Line2D([], [], color="#ff66ff", marker="o", ms=3, label="plan 6 s"))
+    ax.set_xlim(ext.left_m, -ext.right_m)
+    ax.set_ylim(-ext.back_m, ext.front_m)
+    ax.set_xlabel("lateral y (m, + left of ego)")
+    ax.set_ylabel("forward x (m)")
+    stretch = (ext.length_m / config.rows) / (ext.width_m / config.cols)
+    note = f"  [lateral axis stretched x{stretch:.1f}]" if stretch > 1.5 else ""
+    speed = scene.ego_state()[4]
+    ax.set_title((title + "\n" if title else "") + f"ego {speed:.1f} m/s, "
+                 f"{int(scene.valid[:, scene.current_index].sum()) - 1} other agents{note}",
+                 fontsize=9)
+    ax.legend(handles=handles, loc="upper right", fontsize=6.5, framealpha=0.8)
+    return _save(fig, path)
+
+
+def scene_figures(data: Path, out: Path, count: int) -> list[Path]:
+    """PNGs of `count` windows spread evenly over a dataset."""
+    from riskmap.data.dataset import DemoDataset
+
+    dataset = DemoDataset(data)
+    picks = np.unique(np.linspace(0, len(dataset) - 1, min(count, len(dataset))).astype(int))
+    paths = []
+    for i in picks:
+        scene = dataset.scene(int(i))
+        title = f"{dataset.source}  window {i}  t = {scene.time_s:.1f} s"
+        paths.append(save_scene_png(scene, dataset.raster_config, Path(out) / f"scene_{i:05d}.png",
+                                    title))
+    return paths
+
+
+def save_plan_panels(scene: Scene, plan, config: RasterConfig, grid, path: Path,
+                     title: str = "") -> Path:
+    """Planner paper Fig. 2-style row: BEV | risk map | goal map | SVF | plan vs demonstration."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    ext = config.extent
+    extent = (ext.left_m, -ext.right_m, -ext.back_m, ext.front_m)
+    fig, axes = plt.subplots(1, 5, figsize=(17, 4.4), dpi=100)
+    axes[0].imshow(raster_to_rgb(rasterize_scene(scene, config)), extent=extent, aspect="auto",
+                   interpolation="nearest")
+    axes[0].set_title("BEV raster")
+    panels = [(plan.risk_map, "risk map (reward, <= 0)", "magma"),
+              (plan.goal_map, "goal map", "viridis"),
+              (np.log10(np.maximum(plan.svf, 1e-4)), "SVF (log10 expected visits)", "inferno")]
+    for ax, (image, name, cmap) in zip(axes[1:4], panels):
+        im = ax.imshow(image, extent=extent, aspect="auto", cmap=cmap, interpolation="nearest")
+        fig.colorbar(im, ax=ax, fraction=0.046, pad=0.02)
+        ax.set_title(name)
+    ax = axes[4]
+    ax.imshow(raster_to_rgb(rasterize_scene(scene, config)), extent=extent, aspect="auto",
+              interpolation="nearest", alpha=0.6)
+    if scene.num_future_steps and scene.valid[scene.ego_index, scene.current_index + 1:].all():
+        origin, heading = ego_pose(scene)
+        demo = np.concatenate([[[0.0, 0.0]], ego_from_world(scene.ego_future_xy(), origin, heading)])
+        ax.plot(demo[:, 1], demo[:, 0], "-o", color="#3ddc84", ms=3, lw=1.5, label="demonstration")
+    mine = np.concatenate([[[0.0, 0.0]], plan.waypoints])
+    ax.plot(mine[:, 1], mine[:, 0], "-o", color="#ff66ff", ms=3, lw=1.5, label="plan")
+    ax.legend(loc="upper right", fontsize=7)
+    ax.set_title("plan vs demonstration")
+    for ax in axes:
+        ax.set_xlim(ext.left_m, -ext.right_m)
+        ax.set_ylim(-ext.back_m, ext.front_m)
+        ax.set_xlabel("lateral y (m)")
+    axes[0].set_ylabel("forward x (m)")
+    if title:
+        fig.suptitle(title, fontsize=10)
+    return _save(fig, path)
+
+
+def plan_figures(checkpoint: Path, data: Path, out: Path, count: int, seed: int = 0) -> list[Path]:
+    """Fig. 2-style panels of `count` windows spread over a dataset, planned by a checkpoint."""
+    from riskmap.data.dataset import DemoDataset
+    from riskmap.planner.riskmap_planner import RiskMapPlanner
+
+    planner = RiskMapPlanner.load(checkpoint, seed=seed)
+    dataset = DemoDataset(data, planner.grid.rows, raster=planner.raster)
+    picks = np.unique(np.linspace(0, len(dataset) - 1, min(count, len(dataset))).astype(int))
+    paths = []
+    for i in picks:
+        scene = dataset.scene(int(i))
+        plan = planner.plan(scene)
+        origin, heading = ego_pose(scene)
+        demo = ego_from_world(scene.ego_future_xy(), origin, heading)
+        ade = float(np.linalg.norm(plan.waypoints - demo, axis=1).mean())
+        title = (f"{dataset.source} window {i}: ego {scene.ego_state()[4]:.1f} m/s, "
+                 f"ADE {ade:.1f} m, plan {1000 * plan.timings_s['total']:.0f} ms")
+        paths.append(save_plan_panels(scene, plan, planner.raster, planner.grid,
+                                      Path(out) / f"plan_{i:05d}.png", title))
+    return paths
+
+
+def plan_frame_writer(out_dir: Path, planner, stem: str, label: str):
+    """A rollout `on_plan` hook (riskmap.sim.rollout.DriveHooks) that writes one PNG per replan,
+    `out_dir/{stem}_tNNNN.png` (NNNN: the control step), titled `{label} t = …`."""
+    def write(run, scene, plan, step: int) -> None:
+        save_plan_png(scene, plan, planner.raster, Path(out_dir) / f"{stem}_t{step:04d}.png",
+                      f"{label} t = {run.time_s:.1f} s")
+    return write

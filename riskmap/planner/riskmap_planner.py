@@ -1,0 +1,93 @@
+"""The risk-map planner: BEV raster → risk map → soft value iteration → SVF → sampled plan."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import torch
+
+from rasterize.config import GridConfig, RasterConfig
+from rasterize.errors import InputError
+from rasterize.maps import goal_map, motion_features, route_goal_cell, start_cell
+from rasterize.raster import rasterize_scene
+from rasterize.scene import Scene
+from riskmap.planner.irl import goal_log_map
+from riskmap.planner.sampler import SamplerConfig, sample_trajectory
+from riskmap.planner.vi import soft_value_iteration, state_visitation
+from riskmap.sim.plan import Plan
+
+
+class RiskMapPlanner:
+    """BEV raster → risk map → soft value iteration → SVF → sampled 12-waypoint trajectory.
+
+    The goal is the route rule's (`rasterize.highway.RouteRule`): the last point of the ego's
+    route ahead inside the grid, the same rule that built the training goal maps.
+    """
+
+    def __init__(self, model: torch.nn.Module, raster: RasterConfig, grid: GridConfig,
+                 horizon: int, goal_variance: float, gamma: float = 1.0,
+                 sampler: SamplerConfig = SamplerConfig(), seed: int = 0):
+        self.model, self.raster, self.grid = model.eval(), raster, grid
+        self.horizon, self.goal_variance, self.gamma = horizon, goal_variance, gamma
+        self.sampler, self.seed = sampler, seed
+        self._calls = 0
+
+    @classmethod
+    def load(cls, checkpoint: str | Path, seed: int = 0,
+             goal_variance: float | None = None) -> RiskMapPlanner:
+        """Planning-time goal variance (cells²), first found of: `goal_variance`, the sidecar's
+        `planning.goal_variance`, the training value `irl.goal_variance`.
+
+        Why it may differ from training: the goal enters value iteration as −d²/(2σ²) against
+        per-cell rewards of about −1 to −2 on lanes, so the policy stops where one more cell
+        towards the goal gains less than a cell costs, (2d − 1)/(2σ²) < |r|. With σ² = 5 that is
+        ~8 cells (~38 m on highway) short of the goal, and a short plan means a slow ego. A
+        narrower goal at planning time moves the end onto the goal without retraining
+        (experiments/README.md, "Planning-time goal variance").
+        """
+        from riskmap.planner.model import load_model
+
+        model, side = load_model(Path(checkpoint))
+        variance = goal_variance
+        if variance is None:
+            variance = side.get("planning", {}).get("goal_variance", side["irl"]["goal_variance"])
+        if variance <= 0:
+            raise InputError(f"goal variance must be > 0 cells², got {variance}")
+        return cls(model, RasterConfig.from_dict(side["raster"]), GridConfig.from_dict(side["grid"]),
+                   side["irl"]["horizon"], variance, side["irl"]["gamma"],
+                   SamplerConfig(**side["sampler"]), seed)
+
+    def reset(self, scene: Scene) -> None:
+        self._calls = 0
+
+    def plan(self, scene: Scene) -> Plan:
+        scene = scene.past()
+        t = {}
+        t0 = time.perf_counter()
+        raster = rasterize_scene(scene, self.raster)
+        motion = motion_features(scene, self.grid)
+        goal_cell = route_goal_cell(scene, self.grid)
+        start = start_cell(self.grid)
+        t["raster"] = time.perf_counter() - t0
+        with torch.no_grad():
+            t0 = time.perf_counter()
+            risk = self.model(torch.from_numpy(raster).float().div_(255.0)[None],
+                              torch.from_numpy(motion)[None])
+            t["network"] = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            g = goal_log_map(torch.tensor([goal_cell]), self.grid.rows, self.grid.cols,
+                             self.goal_variance)
+            _, policy = soft_value_iteration(risk, g, self.horizon, self.gamma)
+            t["vi"] = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            svf, _ = state_visitation(policy, torch.tensor([start]), self.horizon)
+            t["svf"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        waypoints = sample_trajectory(policy[0], start, self.horizon, self.grid, self.sampler,
+                                      seed=(self.seed * 1_000_003 + self._calls) % 2**32)  # any planner seed
+        t["sampler"] = time.perf_counter() - t0
+        self._calls += 1
+        t["total"] = sum(t.values())
+        return Plan(waypoints, risk[0].numpy(), goal_map(goal_cell, self.grid, self.goal_variance),
+                    policy[0].numpy(), svf[0].numpy(), goal_cell, t)

@@ -1,0 +1,216 @@
+"""One seeded highway-env episode with the IDM/MOBIL "human" ego, stepped at a fixed rate.
+
+Shared by demonstration collection and closed-loop driving, so that a planner driven on seed S
+meets exactly the traffic that the human met on seed S.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rasterize.config import family_of_env
+
+
+@dataclass(frozen=True)
+class DriverRanges:
+    """Per-episode IDM/MOBIL parameters of the ego, drawn uniformly from these ranges."""
+
+    desired_speed_mps: tuple[float, float]
+    time_gap_s: tuple[float, float] = (1.0, 2.0)
+    politeness: tuple[float, float] = (0.0, 0.5)
+
+
+@dataclass(frozen=True)
+class FamilySetup:
+    """How one scenario family is simulated."""
+
+    episode_s: float                   # simulated seconds per episode
+    drivers: DriverRanges
+    env_config: dict = field(default_factory=dict)
+    keep_radius_m: float = 250.0       # vehicles farther from the ego are removed
+    ego_destinations: tuple[str, ...] = ()   # exits the ego may be routed to (random per episode)
+    spawn_every_s: float = 0.0         # >0: call the env's own traffic spawner this often
+
+
+FAMILY_SETUPS: dict[str, FamilySetup] = {
+    "highway": FamilySetup(40.0, DriverRanges((20.0, 32.0)), {"vehicles_count": 40}),
+    "merge": FamilySetup(25.0, DriverRanges((20.0, 30.0))),
+    "roundabout": FamilySetup(20.0, DriverRanges((8.0, 16.0)), {"duration": 20},
+                              ego_destinations=("exr", "sxr", "nxr")),
+    "intersection": FamilySetup(16.0, DriverRanges((6.0, 10.0)), {"duration": 16},
+                                keep_radius_m=150.0, ego_destinations=("o1", "o2", "o3"),
+                                spawn_every_s=1.0),
+}
+
+
+def episode_seed(seed: int, episode: int) -> int:
+    """Independent, reproducible seed of one episode."""
+    return int(np.random.SeedSequence([seed, episode]).generate_state(1)[0])
+
+
+def make_env(env_id: str, record_hz: int = 10):
+    import warnings
+
+    import gymnasium as gym
+    import highway_env  # noqa: F401  (registers the envs)
+
+    # The -v0 ids are the ones this toolkit is built and benchmarked on; silence gymnasium's
+    # notice that newer versions exist.
+    warnings.filterwarnings("ignore", message=".*is out of date.*", category=DeprecationWarning)
+
+    setup = FAMILY_SETUPS[family_of_env(env_id)]
+    env_config = {"simulation_frequency": record_hz, "policy_frequency": 1,
+                  "duration": setup.episode_s}
+    env_config.update(setup.env_config)
+    return gym.make(env_id, config=env_config)
+
+
+_ENVS: dict = {}
+
+
+def cached_env(env_id: str, record_hz: int = 10):
+    """`make_env(env_id, record_hz)`, made once per process: every episode resets it from its own
+    seed, so reuse does not change results."""
+    if (env_id, record_hz) not in _ENVS:
+        _ENVS[env_id, record_hz] = make_env(env_id, record_hz)
+    return _ENVS[env_id, record_hz]
+
+
+def _install_human_ego(base, rng: np.random.Generator, setup: FamilySetup) -> dict:
+    """Replace the env's controlled vehicle by an IDM/MOBIL driver with sampled parameters."""
+    from highway_env.vehicle.behavior import IDMVehicle
+
+    old = base.vehicle
+    ego = IDMVehicle.create_from(old)
+    drivers = setup.drivers
+    params = {
+        "desired_speed_mps": float(rng.uniform(*drivers.desired_speed_mps)),
+        "time_gap_s": float(rng.uniform(*drivers.time_gap_s)),
+        "politeness": float(rng.uniform(*drivers.politeness)),
+    }
+    ego.target_speed = params["desired_speed_mps"]
+    ego.TIME_WANTED = params["time_gap_s"]  # instance attributes shadow the class defaults
+    ego.POLITENESS = params["politeness"]
+    if setup.ego_destinations:
+        destination = str(rng.choice(setup.ego_destinations))
+        ego.plan_route_to(destination)
+        params["destination"] = destination
+    base.road.vehicles[base.road.vehicles.index(old)] = ego
+    base.controlled_vehicles[0] = ego
+    return params
+
+
+def _off_network(road, vehicle, margin_m: float = 1.0) -> bool:
+    """True once the vehicle is off every lane (past the end of the road, or off it sideways).
+
+    highway-env's own `on_road` checks only the vehicle's assigned lane, which flickers at
+    junctions of the roundabout; the nearest lane of the whole network does not.
+    """
+    lane = road.network.get_lane(road.network.get_closest_lane_index(vehicle.position,
+                                                                     vehicle.heading))
+    return not lane.on_lane(vehicle.position, margin=margin_m)
+
+
+_CLASS_DEFAULTS: dict = {}
+
+
+def restore_vehicle_class_defaults() -> None:
+    """Undo class-level parameter changes that one env leaves behind for the next.
+
+    highway-env's intersection env sets IDMVehicle.DISTANCE_WANTED / COMFORT_ACC_* on the class
+    itself (even when it is only created), so without this a highway episode run after an
+    intersection one in the same process would drive with other IDM parameters, and results
+    would depend on what ran before. The intersection env sets its values again at each reset.
+    The pristine values come from a fresh execution of highway-env's behaviour module, so they
+    are right even if an env already changed the live classes.
+    """
+    import importlib.util
+
+    from highway_env.vehicle import behavior
+
+    if not _CLASS_DEFAULTS:
+        spec = importlib.util.spec_from_file_location("_pristine_highway_env_behavior", behavior.__file__)
+        fresh = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(fresh)
+        for name in ("IDMVehicle", "LinearVehicle"):
+            _CLASS_DEFAULTS[getattr(behavior, name)] = {
+                k: v for k, v in vars(getattr(fresh, name)).items()
+                if k.isupper() and isinstance(v, (int, float))}
+    for cls, values in _CLASS_DEFAULTS.items():
+        for key in [k for k, v in vars(cls).items() if k.isupper() and isinstance(v, (int, float))
+                    and k not in values]:
+            delattr(cls, key)
+        for key, value in values.items():
+            setattr(cls, key, value)
+
+
+class Episode:
+    """Reset `env` for (seed, episode), install the human ego, record every vehicle each step.
+
+    `step()` advances the road by 1 / rate_hz seconds: every vehicle acts (the ego too, whatever
+    vehicle drives it), then once a second vehicles far from the ego are dropped and, where the
+    family has a spawner, new traffic arrives. `done` once the ego crashed or left the network.
+    """
+
+    def __init__(self, env, env_id: str, seed: int, episode: int, rate_hz: int = 10,
+                 setup=None):
+        """`setup(base_env)`, if given, rearranges the road after the human ego is installed and
+        before anything is recorded (scenario templates set their initial conditions there)."""
+        from rasterize.highway import TrafficRecorder
+
+        self.env, self.base = env, env.unwrapped
+        self.setup = FAMILY_SETUPS[family_of_env(env_id)]
+        self.seed = episode_seed(seed, episode)
+        restore_vehicle_class_defaults()
+        env.reset(seed=self.seed)
+        rng = np.random.default_rng([seed, episode, 1])
+        self.driver = _install_human_ego(self.base, rng, self.setup)
+        if setup is not None:
+            setup(self.base)
+        self.rate_hz, self.dt = rate_hz, 1.0 / rate_hz
+        self.recorder = TrafficRecorder(self.base.road, self.ego, self.dt)
+        self.recorder.record()
+        self.steps = 0
+        self.crashed = self.off_network = False
+
+    @property
+    def ego(self):
+        return self.base.vehicle
+
+    @property
+    def time_s(self) -> float:
+        return self.steps * self.dt
+
+    @property
+    def done(self) -> bool:
+        return self.crashed or self.off_network
+
+    def replace_ego(self, vehicle) -> None:
+        """Hand the ego over to another vehicle object at the same state (same recorded agent)."""
+        old = self.ego
+        road = self.base.road
+        road.vehicles[road.vehicles.index(old)] = vehicle
+        self.base.controlled_vehicles[0] = vehicle
+        self.recorder.adopt(vehicle, old)
+
+    def step(self) -> None:
+        road, ego = self.base.road, self.ego
+        road.act()
+        road.step(self.dt)
+        self.steps += 1
+        self.recorder.record()
+        if ego.crashed:
+            self.crashed = True
+            return
+        if self.steps % self.rate_hz == 0:
+            if _off_network(road, ego):
+                self.off_network = True
+                return
+            road.vehicles = [v for v in road.vehicles if v is ego or
+                             np.linalg.norm(v.position - ego.position) <= self.setup.keep_radius_m]
+            every = int(round(self.setup.spawn_every_s * self.rate_hz))
+            if every and self.steps % every == 0:
+                self.base._clear_vehicles()
+                self.base._spawn_vehicle(spawn_probability=self.base.config["spawn_probability"])

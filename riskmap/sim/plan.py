@@ -1,0 +1,56 @@
+"""The planner contract: the `Plan` a planner returns, the `Planner` protocol, and its checks.
+
+Every planner that can drive the ego implements `reset(scene)` and `plan(scene) -> Plan`; the
+rollout (`riskmap.sim.rollout`) replans at 2 Hz and tracks the waypoints with a controller.
+`HumanDriver` marks the IDM/MOBIL ego, which drives itself and makes no plan.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Protocol, runtime_checkable
+
+import numpy as np
+
+from rasterize.errors import InputError
+from rasterize.scene import Scene
+
+PLAN_STEPS = 12      # waypoints
+PLAN_DT_S = 0.5      # seconds between waypoints (6 s at 2 Hz)
+
+
+@dataclass
+class Plan:
+    """waypoints [12, 2]: ego frame (x forward, y left), metres, at 0.5 s steps over 6 s.
+
+    The intermediate products are there for figures; planners without them leave them None.
+    risk_map, goal_map, svf [G, G]; policy [5, G, G]; timings_s: seconds per stage.
+    """
+
+    waypoints: np.ndarray
+    risk_map: np.ndarray | None = None
+    goal_map: np.ndarray | None = None
+    policy: np.ndarray | None = None
+    svf: np.ndarray | None = None
+    goal_cell: tuple[int, int] | None = None
+    timings_s: dict = field(default_factory=dict)
+
+
+@runtime_checkable
+class Planner(Protocol):
+    def reset(self, scene: Scene) -> None: ...
+
+    def plan(self, scene: Scene) -> Plan: ...
+
+
+def check_plan(plan: Plan, name: str) -> Plan:
+    if plan.waypoints.shape != (PLAN_STEPS, 2) or not np.isfinite(plan.waypoints).all():
+        raise InputError(f"planner {name} returned waypoints of shape {plan.waypoints.shape} or "
+                         "non-finite values; expected finite [12, 2]")
+    return plan
+
+
+class HumanDriver:
+    """Marker for `idm`: the simulator's IDM/MOBIL ego keeps driving itself."""
+
+    name = "idm"

@@ -1,0 +1,225 @@
+"""`riskmap train`: MaxEnt IRL training of the risk-map generator on collected demonstrations.
+
+Every epoch: a pass over the training episodes in a seeded order, then validation on held-out
+episodes (demonstration NLL under the policy; ADE/FDE of the sampled plan against the recorded
+future on a fixed subset). Writes RUN/log.csv, TensorBoard scalars in RUN/tb/, RUN/last.* (for
+--resume: weights, optimizer and progress) and RUN/best.* (lowest validation ADE).
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from torch.utils.data import DataLoader, Subset
+
+from rasterize.errors import InputError
+from riskmap.data.dataset import DemoDataset, PerturbedEgo
+from riskmap.infra.atomic import atomic_write
+from riskmap.infra.checkpoint import read_sidecar, save_checkpoint
+from riskmap.planner.irl import IRLConfig, demo_negative_log_likelihood, irl_step
+from riskmap.planner.model import ModelConfig, RiskMapGenerator, load_backbone_weights
+from riskmap.planner.sampler import SamplerConfig, sample_trajectory
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Training run settings. Distances in metres, sigmas in metres, goal variance in cells²."""
+
+    data: str
+    out: str
+    resolution: int = 50
+    uncertainty_weight: float = 1.0
+    sigma_x: float = 0.5
+    sigma_y: float = 1.5
+    goal_variance: float = 5.0
+    goal: str = "route"
+    epochs: int = 10
+    batch_size: int = 32
+    lr: float = 1e-4
+    grad_clip: float = 10.0
+    horizon: int | None = None          # value-iteration steps; default 1.6 × resolution
+    gamma: float = 1.0
+    val_fraction: float = 0.15          # share of episodes held out
+    val_ade_windows: int = 128          # validation windows on which the sampler runs
+    augment_probability: float = 0.5    # share of training windows with a perturbed ego pose
+    augment_heading_deg: float = 10.0
+    augment_lateral_m: float = 1.0
+    seed: int = 0
+    device: str = "auto"
+    backbone_weights: str | None = None
+    max_windows: int | None = None      # cap on training windows (smoke tests)
+
+    def __post_init__(self) -> None:
+        for name in ("epochs", "batch_size", "resolution"):
+            if getattr(self, name) < 1:
+                raise InputError(f"--{name.replace('_', '-')} must be positive")
+        if self.horizon is None:
+            object.__setattr__(self, "horizon", int(round(1.6 * self.resolution)))
+        if not 0 < self.val_fraction < 1:
+            raise InputError(f"val_fraction must be in (0, 1), got {self.val_fraction}")
+
+    @property
+    def irl(self) -> IRLConfig:
+        return IRLConfig(self.horizon, self.gamma, self.uncertainty_weight, self.goal_variance)
+
+
+def resolve_device(name: str) -> torch.device:
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name.startswith("cuda") and not torch.cuda.is_available():
+        raise InputError(f"--device {name}: no CUDA device here; use --device cpu or auto")
+    return torch.device(name)
+
+
+def split_episodes(dataset: DemoDataset, val_fraction: float) -> tuple[list[int], list[int]]:
+    """Window indices of training and validation episodes (the last episodes are held out)."""
+    episodes = sorted({dataset.episode_of(i) for i in range(len(dataset))})
+    n_val = max(1, int(math.ceil(val_fraction * len(episodes))))
+    if len(episodes) < 2:
+        raise InputError(f"dataset {dataset.root} has {len(episodes)} episode(s) with windows; "
+                         "training needs at least 2 (one is held out for validation)")
+    val_eps = set(episodes[-n_val:])
+    train = [i for i in range(len(dataset)) if dataset.episode_of(i) not in val_eps]
+    val = [i for i in range(len(dataset)) if dataset.episode_of(i) in val_eps]
+    return train, val
+
+
+def _to(batch: dict, device: torch.device) -> dict:
+    return {k: v.to(device) for k, v in batch.items()}
+
+
+def _evaluate(model, loader, config: TrainConfig, grid, device) -> dict:
+    model.eval()
+    nll, ade, fde, seen = [], [], [], 0
+    with torch.no_grad():
+        for batch in loader:
+            batch = _to(batch, device)
+            risk = model(batch["raster"], batch["motion"])
+            step = irl_step(risk, batch, config.irl)
+            nll.append(demo_negative_log_likelihood(step.policy, batch["demo_path"]).cpu())
+            for i in range(risk.shape[0]):
+                if seen >= config.val_ade_windows:
+                    break
+                plan = sample_trajectory(step.policy[i].cpu(), tuple(batch["start_cell"][i].tolist()),
+                                         config.horizon, grid, SamplerConfig(), seed=seen)
+                err = np.linalg.norm(plan - batch["future"][i].cpu().numpy(), axis=1)
+                ade.append(err.mean())
+                fde.append(err[-1])
+                seen += 1
+    return {"val_nll": float(torch.cat(nll).mean()), "val_ade_m": float(np.mean(ade)),
+            "val_fde_m": float(np.mean(fde))}
+
+
+def _sidecar(config: TrainConfig, model_config: ModelConfig, dataset: DemoDataset, metrics: dict,
+             epoch: int) -> dict:
+    return {
+        "model": model_config.to_dict(),
+        "raster": dataset.raster_config.to_dict(),
+        "grid": dataset.grid.to_dict(),
+        "irl": asdict(config.irl),
+        "train": asdict(config),
+        "sampler": asdict(SamplerConfig()),
+        "maps": {"sigma_x": config.sigma_x, "sigma_y": config.sigma_y,
+                 "goal_variance": config.goal_variance, "goal": config.goal},
+        "dataset": {"env_id": dataset.source, "windows": len(dataset),
+                    "git_commit": dataset.manifest.get("git_commit")},
+        "epoch": epoch,
+        "metrics": metrics,
+    }
+
+
+def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> dict:
+    """Train; returns the best epoch's metrics."""
+    from torch.utils.tensorboard import SummaryWriter
+    from tqdm import tqdm
+
+    out = Path(config.out)
+    if (out / "last.json").exists() and not resume:
+        raise InputError(f"--out {out} already holds a training run; pass --resume to continue "
+                         "it or choose another --out")
+    device = resolve_device(config.device)
+    torch.manual_seed(config.seed)
+    dataset = DemoDataset(config.data, config.resolution, sigma_x=config.sigma_x,
+                          sigma_y=config.sigma_y, goal_variance=config.goal_variance,
+                          goal=config.goal)
+    train_idx, val_idx = split_episodes(dataset, config.val_fraction)
+    if config.max_windows:
+        train_idx = train_idx[: config.max_windows]
+        val_idx = val_idx[: max(1, config.max_windows // 4)]
+    augmented = PerturbedEgo(dataset, config.seed, config.augment_probability,
+                             config.augment_heading_deg, config.augment_lateral_m)
+    model_config = ModelConfig(in_channels=dataset[0]["raster"].shape[0],
+                               resolution=config.resolution)
+    model = RiskMapGenerator(model_config)
+    if config.backbone_weights:
+        load_backbone_weights(model, config.backbone_weights)
+    model.to(device)
+    optimizer = torch.optim.Adam(model.parameters(), lr=config.lr)
+    start_epoch, best = 0, {"val_ade_m": math.inf}
+    if resume and (out / "last.json").exists():
+        previous = read_sidecar(out / "last")
+        if previous["train"] | {"epochs": config.epochs} != asdict(config):
+            raise InputError(f"--out {out} was trained with other settings; resume with the same "
+                             "flags (only --epochs may change) or choose another --out")
+        from safetensors.torch import load_file
+
+        model.load_state_dict(load_file(str(out / "last.safetensors")))
+        optimizer.load_state_dict(torch.load(out / "last_optimizer.pt", weights_only=True))
+        start_epoch = previous["epoch"] + 1
+        best = previous["best"]
+    out.mkdir(parents=True, exist_ok=True)
+    writer = SummaryWriter(str(out / "tb"), purge_step=start_epoch)
+    val_loader = DataLoader(Subset(dataset, val_idx), batch_size=config.batch_size)
+    log_path = out / "log.csv"
+    fields = ["epoch", "train_loss", "train_nll", "val_nll", "val_ade_m", "val_fde_m", "seconds"]
+    if start_epoch == 0:
+        log_path.write_text(",".join(fields) + "\n")
+
+    for epoch in range(start_epoch, config.epochs):
+        started = time.perf_counter()
+        model.train()
+        order = torch.randperm(len(train_idx),
+                               generator=torch.Generator().manual_seed(config.seed * 100003 + epoch))
+        augmented.set_epoch(epoch)
+        loader = DataLoader(Subset(augmented, [train_idx[i] for i in order]),
+                            batch_size=config.batch_size)
+        losses, nlls = [], []
+        bar = tqdm(loader, desc=f"epoch {epoch + 1}/{config.epochs}", disable=not progress,
+                   leave=False)
+        for batch in bar:
+            batch = _to(batch, device)
+            risk = model(batch["raster"], batch["motion"])
+            step = irl_step(risk, batch, config.irl)
+            optimizer.zero_grad()
+            step.loss.backward()
+            torch.nn.utils.clip_grad_norm_(model.parameters(), config.grad_clip)
+            optimizer.step()
+            losses.append(step.loss.item())
+            nlls.append(demo_negative_log_likelihood(step.policy, batch["demo_path"]).mean().item())
+            bar.set_postfix(nll=f"{np.mean(nlls):.2f}")
+        metrics = {"train_loss": float(np.mean(losses)), "train_nll": float(np.mean(nlls)),
+                   **_evaluate(model, val_loader, config, dataset.grid, device)}
+        metrics["seconds"] = round(time.perf_counter() - started, 1)
+        for key, value in metrics.items():
+            writer.add_scalar(key, value, epoch)
+        with log_path.open("a", newline="") as f:
+            csv.DictWriter(f, fields).writerow({"epoch": epoch, **metrics})
+        if metrics["val_ade_m"] < best["val_ade_m"]:
+            best = {"epoch": epoch, **metrics}
+            save_checkpoint(out / "best", model, _sidecar(config, model_config, dataset, metrics, epoch)
+                            | {"best": best})
+        # Progress last, so that a run killed mid-save resumes from the previous epoch.
+        atomic_write(out / "last_optimizer.pt", lambda f: torch.save(optimizer.state_dict(), f))
+        save_checkpoint(out / "last", model,
+                        _sidecar(config, model_config, dataset, metrics, epoch) | {"best": best})
+        if progress:
+            print(f"epoch {epoch + 1}/{config.epochs}: " +
+                  ", ".join(f"{k} {v:.3f}" for k, v in metrics.items()), flush=True)
+    writer.close()
+    return best

@@ -1,0 +1,41 @@
+import json
+
+import pytest
+
+from rasterize.errors import InputError
+from riskmap.data.collect import CollectConfig, run_episode
+from riskmap.evaluation.drive import drive
+from riskmap.registry import make_planner
+from riskmap.sim.episode import make_env
+from riskmap.sim.rollout import DriveConfig
+
+
+def test_idm_drive_replays_the_demonstrator(tmp_path):
+    summary = drive(DriveConfig("intersection-v0", episodes=2, seed=11), "idm", tmp_path / "d",
+                    progress=False)
+    assert summary["summary"]["episodes"] == 2
+    env = make_env("intersection-v0")
+    for e in range(2):
+        record = json.loads((tmp_path / "d" / "episodes" / f"episode_{e:06d}.json").read_text())
+        _, info = run_episode(env, CollectConfig("intersection-v0", 2, seed=11), e)
+        assert record["collided"] == info["ego_crashed"]
+        assert record["simulated_s"] == pytest.approx(info["simulated_s"])
+        assert record["driver"] == info["driver"]
+
+
+def test_planner_drive_writes_episodes_frames_and_resumes(tmp_path, tiny_checkpoint):
+    spec = f"riskmap:{tiny_checkpoint}"
+    config = DriveConfig("intersection-v0", episodes=1, seed=11, episode_s=3.0)
+    first = drive(config, spec, tmp_path / "p", frames=True, progress=False)
+    record = json.loads((tmp_path / "p" / "episodes" / "episode_000000.json").read_text())
+    assert record["plan_calls"] >= 1 and record["plan_ms_median"] > 0
+    assert len(list((tmp_path / "p" / "frames").glob("*.png"))) == record["plan_calls"]
+    with pytest.raises(InputError, match="--resume"):
+        drive(config, spec, tmp_path / "p", progress=False)
+    again = drive(config, spec, tmp_path / "p", resume=True, progress=False)
+    assert again["summary"] == first["summary"]
+
+
+def test_unknown_spec():
+    with pytest.raises(InputError, match="unknown planner spec"):
+        make_planner("teleport")

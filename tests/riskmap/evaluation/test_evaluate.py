@@ -1,0 +1,111 @@
+import json
+
+import numpy as np
+import pytest
+
+import riskmap.evaluation.evaluate as evaluate_module
+from rasterize.errors import InputError
+from riskmap.cli import main
+from riskmap.evaluation.evaluate import EvalConfig, evaluate
+from riskmap.sim.episode import make_env
+from riskmap.sim.log_replay import HumanLog, LogReplayEpisode, ReplayPlanner, record_human_episode
+from riskmap.sim.rollout import DriveConfig, drive_episode
+
+ENV = "intersection-v0"
+
+
+@pytest.fixture(scope="module")
+def human_log():
+    return record_human_episode(make_env(ENV), ENV, seed=11, episode=0, rate_hz=10, episode_s=3.0)
+
+
+def _drive_in_log(planner, log, replay_ego):
+    env = make_env(ENV)
+    run = LogReplayEpisode(env, ENV, 11, 0, log, 10, replay_ego=replay_ego)
+    drive_episode(env, planner, DriveConfig(ENV, 1, seed=11, episode_s=3.0), 0, run=run)
+    states, valid, sizes, _ = run.recorder.arrays()
+    return run, states[: len(sizes)], valid[: len(sizes)]
+
+
+@pytest.mark.slow
+def test_log_mode_replay_reproduces_the_human(human_log):
+    planner = ReplayPlanner()
+    planner.set_log(human_log)
+    run, states, valid = _drive_in_log(planner, human_log, replay_ego=True)
+    assert run.steps == human_log.num_steps - 1 == 30
+    ego = states[run.recorder.ego_id][valid[run.recorder.ego_id]]
+    np.testing.assert_allclose(ego[:, :2], human_log.ego_xy(), atol=1e-9)
+    _assert_ados_follow_the_record(human_log, states, valid, run.recorder.ego_id)
+
+
+def _assert_ados_follow_the_record(log, states, valid, ego_id):
+    """Every recorded ado position appears in the replayed run at the same step (synchronised)."""
+    for a in range(log.states.shape[0]):
+        if a == log.ego_id:
+            continue
+        for k in np.flatnonzero(log.valid[a]):
+            others = valid[:, k].copy()
+            others[ego_id] = False
+            distance = np.linalg.norm(states[others, k, :2] - log.states[a, k, :2], axis=1)
+            assert distance.min() < 1e-9
+
+
+@pytest.mark.slow
+def test_log_mode_traffic_ignores_the_ego(human_log):
+    # A constant-velocity ego drives differently from the human; the traffic still replays its
+    # record exactly (it does not react), which is what log mode means.
+    from riskmap.planner.baselines import ConstantVelocityPlanner
+
+    run, states, valid = _drive_in_log(ConstantVelocityPlanner(), human_log, replay_ego=False)
+    ego = states[run.recorder.ego_id][valid[run.recorder.ego_id]]
+    assert np.abs(ego[:, :2] - human_log.ego_xy()[: len(ego)]).max() > 0.1
+    _assert_ados_follow_the_record(human_log, states, valid, run.recorder.ego_id)
+
+
+def test_replay_needs_a_log_and_log_mode():
+    from tests.scenes import constant_velocity_scene
+
+    with pytest.raises(InputError, match="--mode log"):
+        ReplayPlanner().plan(constant_velocity_scene())
+    with pytest.raises(InputError, match="--mode log only"):
+        EvalConfig(ENV, ("idm", "replay"), 1, mode="reactive")
+    with pytest.raises(InputError, match="once"):
+        EvalConfig(ENV, ("cv", "cv"), 1)
+
+
+@pytest.mark.slow
+def test_evaluate_writes_tables_and_resumes_without_recomputing(tmp_path, monkeypatch):
+    out = tmp_path / "ev"
+    args = ["evaluate", "--planners", "idm,replay", "--env", ENV, "--episodes", "2", "--seed", "11",
+            "--episode-s", "2", "--out", str(out), "--quiet"]
+    assert main(args) == 0
+    results = json.loads((out / "results.json").read_text())["planners"]
+    for spec in ("idm", "replay"):
+        assert results[spec]["episodes"] == 2
+        assert results[spec]["ade_m"]["mean"] == 0.0 and results[spec]["goal_error_m"]["mean"] == 0.0
+    assert results["replay"]["safety_pct"] == results["idm"]["safety_pct"]
+    rows = (out / "episodes.csv").read_text().splitlines()
+    assert len(rows) == 1 + 4 and rows[0].startswith("planner,label,episode")
+    assert "| Human | 2 |" in (out / "table.md").read_text()
+    assert main(args) == 2                                  # refuses to overwrite without --resume
+
+    # Resuming finished work recomputes nothing; adding a planner computes only that planner.
+    calls = []
+    real = evaluate_module.planner_task
+
+    def counting(config, out_dir, spec, episode):
+        calls.append((spec, episode))
+        return real(config, out_dir, spec, episode)
+
+    monkeypatch.setattr(evaluate_module, "planner_task", counting)
+    monkeypatch.setattr(evaluate_module, "record_task", lambda *a: pytest.fail("re-recorded"))
+    config = EvalConfig(ENV, ("idm", "replay"), 2, seed=11, episode_s=2.0)
+    again = evaluate(config, out, resume=True, progress=False)["planners"]
+    assert calls == [] and again == results
+    evaluate(EvalConfig(ENV, ("idm", "replay", "cv"), 2, seed=11, episode_s=2.0), out, resume=True,
+             progress=False)
+    assert calls == [("cv", 0), ("cv", 1)]
+    with pytest.raises(InputError, match="other settings"):
+        evaluate(EvalConfig(ENV, ("idm",), 2, seed=12, episode_s=2.0), out, resume=True, progress=False)
+    log = HumanLog.load(out / "logs" / "episode_000000.npz")
+    assert log.num_steps == 21 and log.dt_s == pytest.approx(0.1)

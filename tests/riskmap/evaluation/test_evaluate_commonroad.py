@@ -1,0 +1,44 @@
+"""`riskmap evaluate --commonroad`: planners drive the recorded vehicles of the fixtures."""
+
+import json
+from pathlib import Path
+
+import pytest
+
+import riskmap.sim.commonroad_replay as replay_module
+from rasterize.errors import InputError
+from riskmap.cli import main
+from riskmap.evaluation.evaluate_commonroad import evaluate_commonroad
+
+FIXTURES = Path(__file__).resolve().parents[2] / "fixtures" / "commonroad"
+pytestmark = pytest.mark.slow
+
+
+def test_replay_recovers_the_human_and_a_rerun_resumes(tmp_path, monkeypatch):
+    out = tmp_path / "cr"
+    results = evaluate_commonroad([FIXTURES], ("replay",), out, progress=False)
+    replay = results["replay"]
+    assert replay["episodes"] == len(list((out / "episodes" / "replay").glob("*.json"))) > 0
+    assert replay["ade_m"]["mean"] < 2.0             # the controller tracking the log itself
+    assert 0.0 <= replay["safety_pct"]["mean"] <= 100.0
+    assert all(r["encounters"] > 0 for r in map(lambda p: json.loads(p.read_text()),
+                                                 (out / "episodes" / "replay").glob("*.json")))
+    assert json.loads((out / "results.json").read_text())["results"]["replay"] == replay
+    assert "| replay |" in (out / "table.md").read_text()
+
+    def must_not_drive(*args, **kwargs):
+        raise AssertionError("a finished episode was driven again")
+
+    monkeypatch.setattr(replay_module, "replay_commonroad_episode", must_not_drive)
+    assert evaluate_commonroad([FIXTURES], ("replay",), out, resume=True, progress=False) == results
+    with pytest.raises(InputError, match="--resume"):
+        evaluate_commonroad([FIXTURES], ("replay",), out, progress=False)
+    with pytest.raises(InputError, match="other settings"):
+        evaluate_commonroad([FIXTURES], ("replay", "cv"), out, resume=True, progress=False)
+
+
+def test_cli_refuses_mixing_recordings_with_simulated_settings(tmp_path, capsys):
+    assert main(["evaluate", "--commonroad", str(FIXTURES), "--planners", "cv", "--env",
+                 "highway-v0", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "--commonroad" in err and "\n" not in err

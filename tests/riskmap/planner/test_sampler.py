@@ -1,0 +1,53 @@
+import numpy as np
+import torch
+
+from rasterize.config import Extent, GridConfig
+from riskmap.planner.sampler import SamplerConfig, sample_paths, sample_trajectory
+from riskmap.planner.vi import soft_value_iteration, state_visitation
+
+GRID = GridConfig(Extent(10.0, 10.0, 10.0, 10.0), rows=20, cols=20)
+
+
+def _policy(goal_cell=(2, 10)):
+    reward = torch.full((1, 20, 20), -2.0, dtype=torch.float64)
+    goal = torch.full((1, 20, 20), -100.0, dtype=torch.float64)
+    goal[0, goal_cell[0], goal_cell[1]] = 0.0
+    return soft_value_iteration(reward, goal, horizon=30)[1][0]
+
+
+def test_sample_paths_follow_the_grid_and_match_the_svf():
+    policy = _policy()
+    paths, lengths = sample_paths(policy, (15, 10), 30, 4000, torch.Generator().manual_seed(0))
+    steps = (paths[:, 1:] - paths[:, :-1]).abs().sum(-1)
+    assert steps.max() <= 1                                   # one 4-neighbour move at a time
+    assert ((paths >= 0) & (paths < 20)).all()
+    # The empirical end distribution matches the analytic svf_goal.
+    _, svf_goal = state_visitation(policy[None], torch.tensor([[15, 10]]), 30)
+    ends = paths[torch.arange(len(paths)), lengths]
+    hit = ((ends[:, 0] == 2) & (ends[:, 1] == 10)).double().mean()
+    assert abs(hit.item() - svf_goal[0, 2, 10].item()) < 0.03
+
+
+def test_trajectory_goes_to_the_goal_and_is_deterministic():
+    policy = _policy()
+    a = sample_trajectory(policy, (15, 10), 30, GRID, SamplerConfig(samples=1000), seed=3)
+    b = sample_trajectory(policy, (15, 10), 30, GRID, SamplerConfig(samples=1000), seed=3)
+    np.testing.assert_array_equal(a, b)
+    assert a.shape == (12, 2)
+    # Goal cell (2, 10) has its centre at x = 7.5, y = -0.5; start (15, 10) at x = -5.5.
+    np.testing.assert_allclose(a[-1], [7.5, -0.5])
+    assert np.all(np.diff(a[:, 0]) >= 0)                     # straight up, never back
+
+
+def test_waypoints_are_evenly_spaced_in_metres_on_non_square_cells():
+    from riskmap.planner.sampler import downsample
+
+    grid = GridConfig(Extent(200.0, 40.0, 20.0, 20.0), rows=50, cols=50)   # 4.8 m x 0.8 m cells
+    # 10 moves up, then 5 moves left: 48 m forward and 4 m sideways.
+    cells = [(40, 25)] + [(40 - k, 25) for k in range(1, 11)] + [(30, 25 - k) for k in range(1, 6)]
+    paths = np.array(cells)[None]
+    wp = downsample(paths, np.array([15]), 12, grid)[0]
+    x0, y0 = grid.extent.front_m - 40.5 * 4.8, grid.extent.left_m - 25.5 * 0.8   # start centre
+    s = 52.0 * np.arange(1, 13) / 12                      # equal arc-length steps of 4.33 m
+    expected = np.stack([x0 + np.minimum(s, 48.0), y0 + np.maximum(s - 48.0, 0.0)], axis=1)
+    np.testing.assert_allclose(wp, expected, atol=1e-9)

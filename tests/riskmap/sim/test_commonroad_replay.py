@@ -1,0 +1,87 @@
+"""Log-replay closed loop on a CommonRoad recording (highway-env road from the lanelets)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("commonroad")
+
+from rasterize.commonroad import RecordedTraffic, load_scenario
+from rasterize.errors import InputError
+from rasterize.frames import world_from_highway_env
+from riskmap.planner.baselines import ConstantVelocityPlanner
+from riskmap.sim.commonroad_replay import RecordedFuturePlanner, replay_commonroad_episode, road_from_lanelets
+from riskmap.sim.plan import Plan
+
+RECORDING = Path(__file__).resolve().parents[2] / "fixtures" / "commonroad" / "USA_US101-4_1_T-1.xml"
+
+
+@pytest.fixture(scope="module")
+def traffic() -> RecordedTraffic:
+    return RecordedTraffic(load_scenario(RECORDING), RECORDING.stem)
+
+
+def test_highway_env_road_has_the_lanelets_geometry(traffic):
+    road = road_from_lanelets(traffic.scenario.lanelet_network)
+    lanes = road.network.lanes_list()
+    assert len(lanes) == len(traffic.scenario.lanelet_network.lanelets)
+    # Every lanelet's centre points lie on the centre (lateral 0) of one highway-env lane.
+    for lanelet in traffic.scenario.lanelet_network.lanelets:
+        mid = lanelet.center_vertices[len(lanelet.center_vertices) // 2]
+        hw = np.array([mid[0], -mid[1]])
+        best = min(abs(lane.local_coordinates(hw)[1]) for lane in lanes if lane.on_lane(hw))
+        assert best < 0.05
+    # A recorded vehicle is on the road; a point 30 m beside the outer lanes is not.
+    car = traffic.states[traffic.index_of(475), 50, :2]
+    hw_car = np.array([car[0], -car[1]])
+    assert any(lane.on_lane(hw_car) for lane in lanes)
+    hx, hy = traffic.states[traffic.index_of(475), 50, 2:4]
+    far = car + 30.0 * np.array([-hy, hx])          # 30 m to its left: 475 drives the left lane
+    assert not any(lane.on_lane(np.array([far[0], -far[1]])) for lane in lanes)
+    assert np.allclose(world_from_highway_env(hw_car), car)
+
+
+def test_replaying_the_log_recovers_the_recorded_human(traffic):
+    result = replay_commonroad_episode(traffic, 475, RecordedFuturePlanner(traffic, 475))
+    assert result["simulated_s"] == pytest.approx(8.0)            # 2 s to the end of the record
+    assert not result["collided"] and not result["off_road"]
+    assert result["plan_calls"] == 16                              # 2 Hz over 8 s
+    assert result["ade_m"] < 2.0 and result["goal_error_m"] < 3.0
+    assert result["distance_m"] == pytest.approx(result["human_distance_m"], rel=0.15)
+    assert result["min_gap_m"] > 1.0
+
+
+def test_a_planner_that_ignores_the_slowing_leader_collides(traffic):
+    # Vehicle 475 slows from 6 to 3 m/s behind a leader; holding 6 m/s runs into it.
+    result = replay_commonroad_episode(traffic, 475, ConstantVelocityPlanner())
+    assert result["collided"] and result["min_gap_m"] == 0.0
+    assert result["collision"] == {"other_id": 468, "other_ahead": True}
+    assert result["simulated_s"] < 8.0
+    assert result["ade_m"] > 1.0
+
+
+class _StopPlanner:
+    def reset(self, scene) -> None:
+        pass
+
+    def plan(self, scene) -> Plan:
+        return Plan(np.zeros((12, 2)))
+
+
+def test_replayed_traffic_does_not_react_and_the_report_says_so(traffic):
+    # 468 is 475's leader: stopping it gets it struck from behind by the replayed 475.
+    result = replay_commonroad_episode(traffic, 468, _StopPlanner())
+    assert result["collided"] and result["collision"] == {"other_id": 475, "other_ahead": False}
+    assert result["distance_m"] < 0.25 * result["human_distance_m"]      # it braked to a stop
+
+
+def test_bad_input_is_an_input_error(traffic):
+    with pytest.raises(InputError, match="ego id 1"):
+        replay_commonroad_episode(traffic, 1, ConstantVelocityPlanner())
+    with pytest.raises(InputError, match="outside vehicle 475"):
+        replay_commonroad_episode(traffic, 475, ConstantVelocityPlanner(), start_s=12.0)
+    with pytest.raises(InputError, match="does not exist"):
+        replay_commonroad_episode(RECORDING.with_name("none.xml"), 475, ConstantVelocityPlanner())
