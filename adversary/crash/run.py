@@ -25,6 +25,7 @@ from adversary.crash.attack import AttackConfig, attack_records, load_models
 from rasterize.errors import InputError
 from riskmap.infra.atomic import atomic_write, write_json
 from riskmap.infra.provenance import provenance
+from riskmap.infra.rundir import claim_out_dir
 
 INDEX = "index.json"
 
@@ -168,15 +169,9 @@ def run_attacks(planner_spec: str, scenes_dir: Path, count: int, config: AttackC
     attacks_dir = out / "attacks"
     meta = {"planner": planner_spec, "scenes": str(scenes_dir), "count": count, "config": asdict(config),
             "seed": seed, "traffic_model": str(traffic), "selector_model": str(selectors) if selectors else None}
-    if attacks_dir.exists() and any(attacks_dir.iterdir()):
-        if not resume:
-            raise InputError(f"--out {out} already holds attacks; pass --resume to continue or choose another --out")
-        previous = json.loads((out / "run.json").read_text())
-        if {k: v for k, v in previous.items() if k in meta and k != "count"} != \
-                {k: v for k, v in meta.items() if k != "count"}:
-            raise InputError(f"--out {out} was attacked with other settings; choose another --out")
+    claim_out_dir(out, holds="attacks", marker="attacks", resume=resume, settings_file="run.json",
+                  settings=meta, may_change=("count",))
     attacks_dir.mkdir(parents=True, exist_ok=True)
-    write_json(out / "run.json", {**meta, **provenance()})
     todo = [p for p in paths if not (attacks_dir / f"{p.stem}.json").exists()]
     panels_dir = out / "panels"
 

@@ -30,9 +30,9 @@ from adversary.crash.features import SceneTensors
 from adversary.crash.generate import GenerationConfig, attack_loss, generate, logged_ego_future
 from adversary.crash.selection import SelectionModule, candidates, distance_weights
 from adversary.crash.train_traffic import load_traffic_model, load_windows, scene_collides
-from rasterize.errors import InputError
 from riskmap.infra.atomic import write_json
 from riskmap.infra.checkpoint import load_weights, read_sidecar, save_checkpoint
+from riskmap.infra.rundir import refuse_unless_resume
 
 CHECKPOINT_KIND = "crash_selector"
 
@@ -115,8 +115,7 @@ def train_selector(traffic_checkpoint: Path, data: list[Path], out: Path,
                    config: TrainSelectorConfig = TrainSelectorConfig(), resume: bool = False,
                    progress: bool = True) -> dict:
     out = Path(out)
-    if out.exists() and any(out.iterdir()) and not resume:
-        raise InputError(f"--out {out} already holds a run; pass --resume to continue or choose another --out")
+    refuse_unless_resume(out, "a run", None, resume)
     out.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(config.seed)
     model, features, traffic_meta = load_traffic_model(traffic_checkpoint)

@@ -33,6 +33,7 @@ from rasterize.frames import box_corners
 from rasterize.geometry import boxes_overlap
 from riskmap.infra.atomic import write_json
 from riskmap.infra.checkpoint import load_weights, read_sidecar, save_checkpoint
+from riskmap.infra.rundir import refuse_unless_resume
 
 CHECKPOINT_KIND = "traffic_cvae"
 
@@ -211,8 +212,7 @@ def train_traffic(data: list[Path], out: Path, config: TrainTrafficConfig = Trai
     model_config = model_config or TrafficModelConfig()
     features = features or FeatureConfig()
     out = Path(out)
-    if out.exists() and any(out.iterdir()) and not resume:
-        raise InputError(f"--out {out} already holds a run; pass --resume to continue or choose another --out")
+    refuse_unless_resume(out, "a run", None, resume)
     out.mkdir(parents=True, exist_ok=True)
     torch.manual_seed(config.seed)
     rng = np.random.default_rng(config.seed)

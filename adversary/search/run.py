@@ -43,6 +43,7 @@ from adversary.search.scenarios import Template, get_template
 from rasterize.errors import InputError
 from riskmap.infra.atomic import write_json
 from riskmap.infra.provenance import provenance
+from riskmap.infra.rundir import check_same_settings, refuse_unless_resume
 
 ALGORITHMS = ("nsga2", "random")
 
@@ -123,16 +124,9 @@ def _random_batch(problem, n: int, rng: np.random.Generator, template: Template)
 
 
 def _check_out(out: Path, config: SearchConfig, resume: bool) -> None:
-    evaluations = out / "evaluations"
-    if evaluations.exists() and any(evaluations.iterdir()) and not resume:
-        raise InputError(f"--out {out} already holds evaluations; pass --resume to continue or "
-                         "choose another --out")
-    if resume and (out / "run.json").exists():
-        previous = json.loads((out / "run.json").read_text())["config"]
-        same = {k: v for k, v in previous.items() if k != "workers"} == \
-            {k: v for k, v in asdict(config).items() if k != "workers"}
-        if not same:
-            raise InputError(f"--out {out} was searched with other settings; choose another --out")
+    refuse_unless_resume(out, "evaluations", "evaluations", resume)
+    if resume:
+        check_same_settings(out, "run.json", {"config": asdict(config)}, may_change=("config.workers",))
 
 
 def _ray_call(function, args):

@@ -13,10 +13,10 @@ from pathlib import Path
 
 import numpy as np
 
-from rasterize.errors import InputError
 from riskmap.figures.panels import plan_frame_writer
 from riskmap.infra.atomic import write_json
 from riskmap.infra.provenance import provenance
+from riskmap.infra.rundir import claim_out_dir
 from riskmap.registry import make_planner
 from riskmap.sim.episode import make_env
 from riskmap.sim.rollout import DriveConfig, DriveHooks, drive_episode
@@ -47,19 +47,12 @@ def drive(config: DriveConfig, planner_spec: str, out: Path, resume: bool = Fals
     out = Path(out)
     planner = make_planner(planner_spec, seed=config.seed, goal_variance=goal_variance)
     episodes_dir = out / "episodes"
-    if episodes_dir.exists() and any(episodes_dir.iterdir()) and not resume:
-        raise InputError(f"--out {out} already holds driven episodes; pass --resume to continue "
-                         "or choose another --out")
-    meta = {"config": asdict(config), "planner": planner_spec, **provenance()}
+    meta = {"config": asdict(config), "planner": planner_spec}
     if goal_variance is not None:
         meta["goal_variance"] = goal_variance
-    if resume and (out / "run.json").exists():
-        previous = json.loads((out / "run.json").read_text())
-        if previous["config"] | {"episodes": config.episodes} != meta["config"] or \
-                previous["planner"] != planner_spec or \
-                previous.get("goal_variance") != meta.get("goal_variance"):
-            raise InputError(f"--out {out} was driven with other settings; choose another --out")
-    write_json(out / "run.json", meta)
+    claim_out_dir(out, holds="driven episodes", marker="episodes", resume=resume, settings_file="run.json",
+                  settings=meta, may_change=("config.episodes",))
+    meta.update(provenance())
     env = make_env(config.env_id, config.control_hz)
     records = []
     for episode in tqdm(range(config.episodes), disable=not progress, desc=f"drive {planner_spec}"):

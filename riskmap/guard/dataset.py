@@ -29,6 +29,7 @@ from riskmap.guard.events import scene_separations
 from riskmap.guard.features import EDGE_DIM, HORIZON_S, NODE_DIM, OBSERVED, SEGMENT_S, window_features
 from riskmap.infra.atomic import write_json, write_npz
 from riskmap.infra.provenance import provenance
+from riskmap.infra.rundir import claim_out_dir
 
 PLANNER_CHECKPOINTS = {"highway-v0": "checkpoints/riskmap_highway",
                        "intersection-v0": "checkpoints/riskmap_intersection"}
@@ -171,14 +172,8 @@ def collect(config: GuardCollectConfig, out: Path, resume: bool = False, progres
 
     out = Path(out)
     jobs_dir = out / "jobs"
-    if jobs_dir.exists() and any(jobs_dir.iterdir()) and not resume:
-        raise InputError(f"--out {out} already holds guard data; pass --resume to continue or choose "
-                         "another --out")
-    settings = out / "settings.json"
-    if resume and settings.exists() and json.loads(settings.read_text())["config"] != \
-            json.loads(json.dumps(asdict(config))):
-        raise InputError(f"--out {out} was collected with other settings; choose another --out")
-    write_json(settings, {"config": asdict(config), **provenance()})
+    claim_out_dir(out, holds="guard data", marker="jobs", resume=resume, settings_file="settings.json",
+                  settings={"config": asdict(config)})
     envs, planners, metas = {}, {}, []
     for job in tqdm(plan_jobs(config), disable=not progress, desc="guard collect"):
         path = jobs_dir / f"{job.name}.npz"

@@ -23,6 +23,7 @@ from riskmap.guard.metrics import binary_metrics
 from riskmap.guard.tgat import TGAT, TGATConfig
 from riskmap.infra.atomic import atomic_write, write_json
 from riskmap.infra.checkpoint import save_checkpoint
+from riskmap.infra.rundir import refuse_unless_resume
 
 CHECKPOINT_KIND = "guard_tgat"
 ALERT_THRESHOLD = 0.6     # the online threshold of the paper; metrics are also given at 0.5
@@ -70,9 +71,7 @@ def train(data: Path, out: Path, config: GuardTrainConfig = GuardTrainConfig(), 
           progress: bool = True) -> dict:
     out = Path(out)
     state_path = out / "state.pt"
-    if state_path.exists() and not resume:
-        raise InputError(f"--out {out} already holds a guard training run; pass --resume or choose "
-                         "another --out")
+    refuse_unless_resume(out, "a guard training run", "state.pt", resume)
     torch.manual_seed(config.seed)
     splits = {name: _tensors(load_split(data, name)) for name in ("train", "val", "seen", "unseen")}
     model = TGAT(config.model)

@@ -22,6 +22,7 @@ from rasterize.errors import InputError
 from riskmap.data.dataset import DemoDataset, PerturbedEgo
 from riskmap.infra.atomic import atomic_write
 from riskmap.infra.checkpoint import read_sidecar, save_checkpoint
+from riskmap.infra.rundir import refuse_unless_resume
 from riskmap.planner.irl import IRLConfig, demo_negative_log_likelihood, irl_step
 from riskmap.planner.model import ModelConfig, RiskMapGenerator, load_backbone_weights
 from riskmap.planner.sampler import SamplerConfig, sample_trajectory
@@ -140,9 +141,7 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
     from tqdm import tqdm
 
     out = Path(config.out)
-    if (out / "last.json").exists() and not resume:
-        raise InputError(f"--out {out} already holds a training run; pass --resume to continue "
-                         "it or choose another --out")
+    refuse_unless_resume(out, "a training run", "last.json", resume)
     device = resolve_device(config.device)
     torch.manual_seed(config.seed)
     dataset = DemoDataset(config.data, config.resolution, sigma_x=config.sigma_x,

@@ -24,6 +24,7 @@ from rasterize.raster import CHANNELS
 from riskmap.data.dataset import DemoDataset
 from riskmap.infra.atomic import atomic_write
 from riskmap.infra.checkpoint import read_sidecar, save_checkpoint
+from riskmap.infra.rundir import refuse_unless_resume
 from riskmap.planner.bc import CHECKPOINT_KIND, BCConfig, BCNet, bc_inputs, normalise_kind
 from riskmap.training.train import split_episodes
 
@@ -115,9 +116,7 @@ def train_baseline(config: BaselineTrainConfig, resume: bool = False, progress: 
     from tqdm import tqdm
 
     out = Path(config.out)
-    if (out / "last.json").exists() and not resume:
-        raise InputError(f"--out {out} already holds a training run; pass --resume to continue it "
-                         "or choose another --out")
+    refuse_unless_resume(out, "a training run", "last.json", resume)
     torch.manual_seed(config.seed)
     dataset = DemoDataset(config.data)
     train_idx, val_idx = split_episodes(dataset, config.val_fraction)

@@ -1,0 +1,82 @@
+"""The one rule every long command applies to its `--out` directory before it writes anything.
+
+An output directory that already holds work is continued only with `--resume`, and only with the
+settings it was started with; otherwise the command stops with one line naming `--out` and the fix.
+What a command compares on resume is its `settings` minus the keys that may change between
+sittings (`may_change`: more episodes, other worker counts). The settings are then written with
+the package version and git commit (`riskmap.infra.provenance`).
+
+    previous = claim_out_dir(out, holds="driven episodes", marker="episodes", resume=resume,
+                             settings_file="run.json", settings={"config": ..., "planner": spec},
+                             may_change=("config.episodes",))
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from rasterize.errors import InputError
+from riskmap.infra.atomic import write_json
+from riskmap.infra.provenance import provenance
+
+
+def holds_work(path: Path) -> bool:
+    """True for an existing file or a non-empty directory."""
+    path = Path(path)
+    return path.is_file() or (path.is_dir() and any(path.iterdir()))
+
+
+def read_settings(path: Path) -> dict:
+    """A settings/manifest JSON written by an earlier run; unreadable is an InputError."""
+    try:
+        return json.loads(Path(path).read_text())
+    except (OSError, ValueError):
+        raise InputError(f"{path} is unreadable; delete {Path(path).parent} and start again") from None
+
+
+def _without(settings: dict, keys: tuple[str, ...]) -> dict:
+    """`settings` with dotted `keys` removed (one level of nesting), JSON-normalised."""
+    plain = json.loads(json.dumps(settings))
+    for key in keys:
+        head, _, tail = key.partition(".")
+        if tail and isinstance(plain.get(head), dict):
+            plain[head].pop(tail, None)
+        elif not tail:
+            plain.pop(head, None)
+    return plain
+
+
+def refuse_unless_resume(out: Path, holds: str, marker: str | None, resume: bool) -> None:
+    """Stop when `out/marker` (or `out` itself, marker None) already holds work and not `resume`."""
+    out = Path(out)
+    if not resume and holds_work(out / marker if marker else out):
+        raise InputError(f"--out {out} already holds {holds}; pass --resume to continue or choose "
+                         "another --out")
+
+
+def check_same_settings(out: Path, settings_file: str, settings: dict,
+                        may_change: tuple[str, ...] = (), differs: str = "other settings") -> dict | None:
+    """The settings an earlier run wrote to `out/settings_file` (None if none); InputError if they
+    differ from `settings` outside `may_change`."""
+    path = Path(out) / settings_file
+    if not path.exists():
+        return None
+    previous = read_settings(path)
+    mine = _without(settings, may_change)
+    theirs = _without(previous, may_change + tuple(provenance()))
+    if theirs != mine:
+        raise InputError(f"--out {out} was made with {differs}; resume with the same settings or "
+                         "choose another --out")
+    return previous
+
+
+def claim_out_dir(out: Path, *, holds: str, marker: str | None, resume: bool, settings_file: str,
+                  settings: dict, may_change: tuple[str, ...] = (), differs: str = "other settings"
+                  ) -> dict | None:
+    """Apply the rule of the module docstring, then write `settings` (with provenance) to
+    `out/settings_file`; returns the previous settings, or None for a fresh run."""
+    refuse_unless_resume(out, holds, marker, resume)
+    previous = check_same_settings(out, settings_file, settings, may_change, differs) if resume else None
+    write_json(Path(out) / settings_file, {**settings, **provenance()})
+    return previous

@@ -1,0 +1,48 @@
+"""The --out rule every long command applies (riskmap.infra.rundir)."""
+
+import json
+
+import pytest
+
+from rasterize.errors import InputError
+from riskmap.infra.rundir import claim_out_dir, refuse_unless_resume
+
+SETTINGS = {"config": {"env_id": "highway-v0", "episodes": 2, "seed": 0}, "planner": "cv"}
+
+
+def _claim(out, settings=SETTINGS, resume=False):
+    return claim_out_dir(out, holds="driven episodes", marker="episodes", resume=resume,
+                         settings_file="run.json", settings=settings, may_change=("config.episodes",))
+
+
+def test_a_fresh_run_writes_its_settings_with_provenance(tmp_path):
+    assert _claim(tmp_path / "run") is None
+    written = json.loads((tmp_path / "run" / "run.json").read_text())
+    assert written["planner"] == "cv" and "git_commit" in written and "package_version" in written
+
+
+def test_work_already_there_needs_resume(tmp_path):
+    _claim(tmp_path)
+    (tmp_path / "episodes").mkdir()
+    (tmp_path / "episodes" / "episode_000000.json").write_text("{}")
+    with pytest.raises(InputError, match="already holds driven episodes; pass --resume"):
+        _claim(tmp_path)
+    # An empty marker directory is no work: a fresh start is fine.
+    refuse_unless_resume(tmp_path, "x", "nothing_here", resume=False)
+
+
+def test_resume_allows_only_the_keys_that_may_change(tmp_path):
+    _claim(tmp_path)
+    more = {**SETTINGS, "config": {**SETTINGS["config"], "episodes": 5}}
+    assert _claim(tmp_path, more, resume=True)["planner"] == "cv"
+    other = {**SETTINGS, "config": {**SETTINGS["config"], "seed": 1}}
+    with pytest.raises(InputError, match="other settings"):
+        _claim(tmp_path, other, resume=True)
+    with pytest.raises(InputError, match="other settings"):
+        _claim(tmp_path, {**SETTINGS, "goal_variance": 2.0}, resume=True)
+
+
+def test_unreadable_settings_are_one_line(tmp_path):
+    (tmp_path / "run.json").write_text("{not json")
+    with pytest.raises(InputError, match="unreadable"):
+        _claim(tmp_path, resume=True)
