@@ -16,17 +16,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 import torch
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from eval_plans import window_errors
-
 from riskmap.data.dataset import DemoDataset
+from riskmap.evaluation.open_loop import window_errors
 from riskmap.infra.atomic import write_json
 from riskmap.planner.riskmap_planner import RiskMapPlanner
 

@@ -16,16 +16,12 @@ Writes experiments/results/ablation_uncertainty_weight/{results.json,table.md,ab
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from eval_plans import evaluate
-
 from riskmap.evaluation.drive import drive
+from riskmap.evaluation.open_loop import evaluate
 from riskmap.infra.atomic import write_json
 from riskmap.sim.rollout import DriveConfig
 

@@ -19,7 +19,6 @@ ADE / FDE of the 12 plan waypoints against the recorded human's 6 s future, and 
 from __future__ import annotations
 
 import argparse
-import sys
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -27,11 +26,9 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader, Subset
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from eval_plans import window_errors
-
 from rasterize.frames import ego_from_world, ego_pose
 from riskmap.data.dataset import DemoDataset, PerturbedEgo
+from riskmap.evaluation.open_loop import window_errors
 from riskmap.infra.atomic import write_json
 from riskmap.infra.checkpoint import save_checkpoint
 from riskmap.planner.baselines import ConstantVelocityPlanner

@@ -49,6 +49,22 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_tune_goal_variance(args: argparse.Namespace) -> int:
+    from riskmap.evaluation.open_loop import tune_goal_variance
+
+    try:
+        candidates = tuple(float(v) for v in args.candidates.split(","))
+    except ValueError:
+        raise InputError(f"--candidates {args.candidates!r}: give comma-separated numbers, e.g. 5,2,1") from None
+    planning = tune_goal_variance(Path(args.checkpoint), Path(args.data), candidates, args.limit,
+                                  write=not args.dry_run)
+    print(f"chosen goal variance {planning['goal_variance']:g} (lowest mean ADE "
+          f"{min(r['ade_m'] for r in planning['candidates']):.2f} m)"
+          + ("" if args.dry_run else f"; wrote planning.goal_variance to "
+             f"{Path(args.checkpoint).with_suffix('.json')}"))
+    return 0
+
+
 def add_parsers(sub) -> None:
     p = sub.add_parser("drive", help="drive closed-loop episodes with a planner")
     p.add_argument("--checkpoint", help="risk-map planner checkpoint (same as --planner riskmap:CKPT)")
@@ -83,3 +99,12 @@ def add_parsers(sub) -> None:
     p.add_argument("--resume", action="store_true")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=_cmd_evaluate)
+
+    p = sub.add_parser("tune-goal-variance", help="choose a risk-map checkpoint's planning-time goal "
+                                                   "variance on held-out windows (lowest ADE)")
+    p.add_argument("--checkpoint", required=True, help="risk-map planner checkpoint")
+    p.add_argument("--data", required=True, help="held-out windows (not training data)")
+    p.add_argument("--candidates", default="5,2,1,0.5", help="goal variances, cells²")
+    p.add_argument("--limit", type=positive_int, default=60, help="windows, evenly spread")
+    p.add_argument("--dry-run", action="store_true", help="print, do not write the sidecar")
+    p.set_defaults(func=_cmd_tune_goal_variance)
