@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import json
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict
 from pathlib import Path
 
@@ -24,6 +23,7 @@ import numpy as np
 from adversary.crash.attack import AttackConfig, attack_records, load_models
 from rasterize.errors import InputError
 from riskmap.infra.atomic import atomic_write, write_json
+from riskmap.infra.parallel import run_parallel
 from riskmap.infra.provenance import provenance
 from riskmap.infra.rundir import claim_out_dir
 
@@ -104,6 +104,11 @@ def _attack_batch(paths: list[str], planner_spec: str, config: AttackConfig, see
         results = [{"status": "error", "collision": False, "error": message, "seconds": seconds}
                    for _ in paths]
     return [{"name": name, **result} for name, result in zip(names, results)]
+
+
+def _attack_batch_of(args: tuple) -> list[dict]:
+    """`_attack_batch(*args)`: the one-argument form the parallel runner calls."""
+    return _attack_batch(*args)
 
 
 def summarise(records: list[dict]) -> dict:
@@ -195,14 +200,8 @@ def run_attacks(planner_spec: str, scenes_dir: Path, count: int, config: AttackC
 
     if panels:
         panels_dir.mkdir(parents=True, exist_ok=True)
-    if workers <= 1:
-        for a in args:
-            save(_attack_batch(*a))
-    else:
-        with ProcessPoolExecutor(max_workers=workers) as pool:
-            futures = [pool.submit(_attack_batch, *a) for a in args]
-            for future in as_completed(futures):
-                save(future.result())
+    for _, results in run_parallel(_attack_batch_of, args, workers):
+        save(results)
     records = [json.loads((attacks_dir / f"{p.stem}.json").read_text()) for p in paths]
     summary = {**meta, "summary": summarise(records)}
     write_json(out / "summary.json", summary)

@@ -9,8 +9,8 @@ write them as one shard per episode, atomically. `--resume` skips the episodes a
 
 from __future__ import annotations
 
+import functools
 import json
-import multiprocessing as mp
 import shutil
 import time
 from dataclasses import asdict, dataclass
@@ -22,6 +22,7 @@ from rasterize.config import FAMILY_EXTENTS, RasterConfig, family_of_env
 from rasterize.errors import InputError
 from rasterize.scene_io import pack_scenes
 from riskmap.infra.atomic import write_json, write_npz
+from riskmap.infra.parallel import run_parallel
 from riskmap.infra.provenance import provenance
 from riskmap.sim.episode import FAMILY_SETUPS, Episode, FamilySetup, make_env
 
@@ -200,21 +201,11 @@ def collect(config: CollectConfig, out: Path, workers: int = 1, resume: bool = F
     bar = tqdm(total=config.episodes, initial=len(done), unit="episode", disable=not progress,
                desc=f"collect {config.env_id}")
     try:
-        if workers == 1 or len(todo) <= 1:
-            _worker_init(config, str(out))
-            results = map(_worker_episode, todo)
-            pool = None
-        else:
-            pool = mp.get_context("fork").Pool(min(workers, len(todo)), _worker_init,
-                                               (config, str(out)))
-            results = pool.imap_unordered(_worker_episode, todo)
-        for info in results:
+        for _, info in run_parallel(_worker_episode, todo, workers,
+                                    initializer=functools.partial(_worker_init, config, str(out))):
             infos.append(info)
             bar.update(1)
             bar.set_postfix(windows=sum(i["windows"] for i in infos))
-        if pool is not None:
-            pool.close()
-            pool.join()
     except BaseException:
         if created and not any((out / SHARD_DIR).iterdir()):
             shutil.rmtree(out, ignore_errors=True)
