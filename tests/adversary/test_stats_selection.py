@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from adversary.attacks.monitor import collision_type
-from adversary.attacks.selection import softmin_agent_weights
 from adversary.crash.solution import ego_only_solution
 from adversary.report.stats import bootstrap_mean, wilson
+from riskmap.sim.aggressive import softmin_agent_weights
 
 
 def test_wilson_interval_matches_the_closed_form():
