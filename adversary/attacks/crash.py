@@ -42,6 +42,7 @@ from rasterize.config import family_of_env
 from rasterize.errors import InputError
 from riskmap.infra.config_mapping import require
 from riskmap.registry import cached_planner
+from riskmap.sim.metrics import coarse_collision_name
 
 # CRASH's SELECTORS (adversary.crash.selection), spelt out so that reading a config does not
 # import torch; tests/adversary/test_crash_attack.py checks the two agree.
@@ -49,9 +50,6 @@ SELECTORS = ("crash", "crash-no-mam", "distance", "distance+mam", "nearest", "ra
 LEARNED_SELECTORS = ("crash", "crash-no-mam")
 HISTORY_S = 2.0                    # the traffic model's history (adversary.crash.scenes.HISTORY_S)
 WINDOW_DT_S = 0.5                  # its step
-# The judge's collision types as the campaign monitor names them (adversary.attacks.monitor); cut-in has
-# no counterpart there and keeps its name.
-COLLISION_TYPE_NAMES = {"side-swipe": "sideswipe", "T-bone": "side (angle)"}
 
 
 @dataclass(frozen=True)
@@ -156,7 +154,8 @@ def crash_record(result: dict, scene_s: float) -> dict:
             "collided": adversary_hit or bool(m["collision_any"]) or bool(m["collision_before_t0"]),
             "ego_off_road": bool(m["ego_off_road"]), "has_adversary": True,
             "collided_with_adversary": adversary_hit,
-            "collision_type": COLLISION_TYPE_NAMES.get(m["collision_type"], m["collision_type"]),
+            # In the campaign monitor's vocabulary, so that reports count both sources alike.
+            "collision_type": coarse_collision_name(m["collision_type"]),
             "collision_time_s": m["collision_time_s"] if adversary_hit else m["collision_any_time_s"],
             "kinematic_mps": m["kinematic_value_mps"],
             "adversary_off_road": bool(m["adversary_off_road"]),

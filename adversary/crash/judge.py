@@ -24,23 +24,32 @@ from adversary.crash.scenes import WINDOW_DT_S, SceneRecord
 from adversary.crash.solution import ego_only_solution
 from rasterize.errors import InputError
 from rasterize.frames import box_corners
-from rasterize.geometry import box_gap
 from riskmap.registry import cached_planner
 from riskmap.sim.episode import cached_env
 from riskmap.sim.log_replay import HumanLog
+from riskmap.sim.metrics import (
+    COLLISION_TYPES,
+    STRIVE,
+    box_iou,
+    box_off_road,
+    classify_collision,
+    drivable_area,
+    min_box_gap,
+    off_road_fraction,
+)
 
-COLLISION_IOU = 0.02            # STRIVE: a collision is a box IoU above this
-OFF_ROAD_FRACTION = 0.05        # STRIVE: off-road when more than this share of the box is off
+COLLISION_IOU = STRIVE.collision_iou            # a collision is a box IoU above this
+OFF_ROAD_FRACTION = STRIVE.off_road_fraction    # off-road when more than this share of the box is off
 ACCEL_WINDOW_S = 2.0            # ego acceleration is measured over this long before the collision
 CUT_IN_LOOKBACK_S = 3.0         # a cut-in adversary was beside the ego within this long before
 GAP_RADIUS_M = 40.0             # others farther (centre distance) do not count for the min gap
 # Accelerations tried with a lane change in the solution check (with the default set along the path).
 SOLUTION_LATERAL_ACCELS_MPS2 = (-6.0, -3.0, 0.0, 2.0)
-COLLISION_TYPES = ("ego rear-ends", "ego rear-ended", "cut-in", "side-swipe", "head-on", "T-bone")
-
-
-def _wrap(angle):
-    return (np.asarray(angle) + np.pi) % (2 * np.pi) - np.pi
+# Box IoU, off-road and the collision classifier are defined in riskmap.sim.metrics; callers
+# keep importing them from here.
+__all__ = ["COLLISION_IOU", "COLLISION_TYPES", "OFF_ROAD_FRACTION", "Rollout", "box_iou", "braking_track",
+           "classify_collision", "drivable_area", "ego_future_2hz", "ego_track_2hz", "handover_offsets",
+           "judge", "off_road_fraction", "rollout", "splice_tracks"]
 
 
 def _check_tracks(record: SceneRecord, tracks: np.ndarray, rows) -> tuple[np.ndarray, np.ndarray]:
@@ -222,81 +231,6 @@ def braking_track(record: SceneRecord, row: int, decel_mps2: float = 8.0, into_e
     speed = np.linalg.norm(step, axis=1) / WINDOW_DT_S
     return np.column_stack([xy, headings, speed, np.zeros(len(times))])
 
-# ---- geometry -------------------------------------------------------------------------------
-
-def box_polygon(state: np.ndarray, size: np.ndarray):
-    """The shapely polygon of a vehicle box: state [>=4] (x, y, heading_x, heading_y), size (l, w)."""
-    from shapely.geometry import Polygon
-
-    return Polygon(box_corners(state[:2], state[2:4], float(size[0]), float(size[1])))
-
-
-def box_iou(state_a: np.ndarray, size_a: np.ndarray, state_b: np.ndarray, size_b: np.ndarray) -> float:
-    """Intersection over union of two vehicle boxes."""
-    a, b = box_polygon(state_a, size_a), box_polygon(state_b, size_b)
-    inter = a.intersection(b).area
-    return float(inter / (a.area + b.area - inter)) if inter > 0 else 0.0
-
-
-def drivable_area(lanes):
-    """Union of the lanes' polygons (shapely); curved lanes whose outline crosses itself are
-    repaired first."""
-    from shapely import make_valid, unary_union
-    from shapely.geometry import Polygon
-
-    return unary_union([make_valid(Polygon(lane.polygon())) for lane in lanes])
-
-
-def off_road_fraction(state: np.ndarray, size: np.ndarray, area) -> float:
-    """Share of the box's area outside the drivable `area` (0 on the road, 1 fully off)."""
-    box = box_polygon(state, size)
-    outside = float(1.0 - box.intersection(area).area / box.area)
-    return outside if outside > 1e-9 else 0.0      # no rounding noise for boxes on the road
-
-
-# ---- collision type -------------------------------------------------------------------------
-
-def _in_frame(ego_state: np.ndarray, point: np.ndarray) -> tuple[float, float]:
-    """(forward, left) of `point` in the frame of `ego_state` (x, y, heading_x, heading_y, ...)."""
-    h = ego_state[2:4] / max(np.linalg.norm(ego_state[2:4]), 1e-12)
-    d = point - ego_state[:2]
-    return float(d @ h), float(-d[0] * h[1] + d[1] * h[0])
-
-
-def classify_collision(ego_track: np.ndarray, adv_track: np.ndarray, ego_size: np.ndarray,
-                       adv_size: np.ndarray) -> str:
-    """Type of the collision at the last step of ego_track / adv_track [K, 6] (the steps leading
-    up to it, e.g. the last CUT_IN_LOOKBACK_S; only the last one is needed for all but cut-in).
-
-    With dpsi the adversary's heading relative to the ego's and (forward, lateral) the
-    adversary's centre in the ego's frame at the collision:
-    - head-on: |dpsi| > 120 deg;
-    - T-bone: 60 deg <= |dpsi| <= 120 deg;
-    - otherwise (same direction), cut-in: the adversary is ahead (forward > 0) and at some earlier
-      step of the tracks it was beside the ego's path, |lateral| >= (w_ego + w_adv) / 2 in the
-      ego's frame of that step, i.e. it came into the ego's lane from another;
-    - otherwise ego rear-ends / ego rear-ended: the boxes meet through their fronts / rears: the
-      longitudinal penetration (l_ego + l_adv) / 2 - |forward| is at most the lateral one
-      (w_ego + w_adv) / 2 - |lateral|; "ego rear-ends" when the adversary is ahead;
-    - otherwise side-swipe (the boxes meet through their sides).
-    """
-    ego, adv = ego_track[-1], adv_track[-1]
-    dpsi = abs(float(_wrap(np.arctan2(adv[3], adv[2]) - np.arctan2(ego[3], ego[2]))))
-    if dpsi > np.radians(120):
-        return "head-on"
-    if dpsi >= np.radians(60):
-        return "T-bone"
-    forward, lateral = _in_frame(ego, adv[:2])
-    half_widths = 0.5 * (float(ego_size[1]) + float(adv_size[1]))
-    if forward > 0 and any(abs(_in_frame(e, a[:2])[1]) >= half_widths
-                           for e, a in zip(ego_track[:-1], adv_track[:-1])):
-        return "cut-in"
-    long_pen = 0.5 * (float(ego_size[0]) + float(adv_size[0])) - abs(forward)
-    lat_pen = half_widths - abs(lateral)
-    if long_pen <= lat_pen:
-        return "ego rear-ends" if forward > 0 else "ego rear-ended"
-    return "side-swipe"
-
 
 # ---- metrics --------------------------------------------------------------------------------
 
@@ -339,15 +273,17 @@ def _ego_accelerations(result: Rollout, end_step: int) -> tuple[float, float]:
 
 
 def _min_gap(result: Rollout, from_step: int, to_step: int) -> float:
+    """Smallest box gap (m) between the ego and any vehicle within GAP_RADIUS_M over the steps."""
     s, v, ego = result.states, result.valid, result.ego
     gaps = []
     for k in range(from_step, to_step + 1):
         if not v[ego, k]:
             continue
         mine = box_corners(s[ego, k, :2], s[ego, k, 2:4], *result.sizes[ego])
-        for a in np.flatnonzero(v[:, k]):
-            if a != ego and np.linalg.norm(s[a, k, :2] - s[ego, k, :2]) < GAP_RADIUS_M:
-                gaps.append(box_gap(mine, box_corners(s[a, k, :2], s[a, k, 2:4], *result.sizes[a])))
+        near = [a for a in np.flatnonzero(v[:, k])
+                if a != ego and np.linalg.norm(s[a, k, :2] - s[ego, k, :2]) < GAP_RADIUS_M]
+        gaps.append(min_box_gap(mine, (box_corners(s[a, k, :2], s[a, k, 2:4], *result.sizes[a])
+                                       for a in near)))
     return float(min(gaps, default=float("inf")))
 
 
@@ -444,7 +380,7 @@ def judge(record: SceneRecord, tracks: np.ndarray, rows, adversary_row: int, pla
 
         def on_road(centre, heading, length, width):
             state = np.array([*centre, *heading])
-            return off_road_fraction(state, (length, width), area) <= OFF_ROAD_FRACTION
+            return not box_off_road(state, (length, width), area)
 
         metrics["solution_found_longitudinal"] = bool(longitudinal)
         metrics["solution_found"] = bool(longitudinal) or bool(ego_only_solution(

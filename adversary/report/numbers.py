@@ -28,8 +28,9 @@ import numpy as np
 
 from adversary.report.stats import bootstrap_mean, wilson
 from rasterize.config import family_of_env
+from riskmap.sim.metrics import CAMPAIGN_COLLISION_TYPES
 
-COLLISION_TYPES = ("ego rear-ends", "ego rear-ended", "sideswipe", "side (angle)", "head-on", "cut-in")
+COLLISION_TYPES = CAMPAIGN_COLLISION_TYPES      # the labels a campaign record's collision_type can hold
 
 
 def _group_metrics(records: list[dict]) -> dict:
