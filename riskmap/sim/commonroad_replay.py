@@ -15,7 +15,6 @@ was at the end).
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -32,17 +31,17 @@ from rasterize.errors import InputError
 from rasterize.frames import (
     box_corners,
     ego_from_world,
-    ego_pose,
     heading_from_highway_env,
     highway_env_from_world,
     world_from_highway_env,
 )
 from rasterize.geometry import box_gap
 from rasterize.scene import STATE_DIM, Scene
-from riskmap.sim.control import ControllerConfig, TrackingController, planned_vehicle_class
+from riskmap.sim.control import planned_vehicle_class
 from riskmap.sim.episode import _off_network
 from riskmap.sim.metrics import SafetyConfig, dangerous_encounters, safety_pct
-from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, Plan, check_plan
+from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, Plan
+from riskmap.sim.rollout import LoopConfig, drive_world
 
 
 @dataclass(frozen=True)
@@ -132,6 +131,151 @@ def _ego_scene(traffic: RecordedTraffic, ego: int, track_t: list[float], track: 
                  source=f"commonroad:{traffic.name}", time_s=now_s, route_xy=route)
 
 
+class CommonRoadWorld:
+    """Recorded vehicle `ego_id` of `traffic`, planner-driven from `start_s` among the replayed
+    others: a `riskmap.sim.world.World` (module docstring).
+
+    The ego's track (`track_t` s, `track` [6] world states) is the recorded history up to the
+    hand-over, then the closed loop; `driven()` is the closed-loop part. `n_steps`: steps to the
+    end of the recording (or of `duration_s`). `collision` names the vehicle that was hit.
+    """
+
+    def __init__(self, traffic: RecordedTraffic, ego_id: int, start_s: float | None = None,
+                 duration_s: float | None = None, config: ReplayConfig = ReplayConfig(),
+                 scene_config: CommonRoadSceneConfig | None = None):
+        self.traffic, self.config = traffic, config
+        self.scene_config = scene_config or CommonRoadSceneConfig()
+        self.ego_id, self.ego_index = int(ego_id), traffic.index_of(ego_id)
+        ego = self.ego_index
+        self.dt = 1.0 / config.control_hz
+        self.start, self.n_steps = self._span(start_s, duration_s)
+        hist_t = np.arange(max(traffic.span(ego)[0] * traffic.dt_s, self.start - config.history_s),
+                           self.start + 1e-9, self.dt)
+        hist, _ = traffic.resample(np.array([ego]), hist_t)
+        self.track_t, self.track = list(hist_t), list(hist[0])
+        self.history_len = len(hist_t)
+        self.road = road_from_lanelets(traffic.scenario.lanelet_network)
+        self.lanes = lanes_from_lanelets(traffic.scenario.lanelet_network)
+        self.vehicle = self._planned_vehicle(self.track[-1])
+        self.others = np.array([a for a in range(len(traffic.ids)) if a != ego], dtype=np.int64)
+        self.steps = 0
+        self.crashed = self.off_network = False
+        self.collision: dict | None = None
+        self._gaps: dict[float, list] = {}        # radius -> this step's (gap, agent, xy) near
+
+    def _span(self, start_s: float | None, duration_s: float | None) -> tuple[float, int]:
+        first, last = self.traffic.span(self.ego_index)
+        t_first, t_last = first * self.traffic.dt_s, last * self.traffic.dt_s
+        start = t_first + self.config.history_s if start_s is None else float(start_s)
+        if not t_first <= start < t_last:
+            raise InputError(f"start {start:g} s is outside vehicle {self.ego_id}'s "
+                             f"recording ({t_first:g}-{t_last:g} s of {self.traffic.name})")
+        end = t_last if duration_s is None else min(t_last, start + float(duration_s))
+        return start, int(np.floor((end - start) / self.dt + 1e-9))
+
+    def _planned_vehicle(self, now: np.ndarray):
+        vehicle = planned_vehicle_class()(self.road, highway_env_from_world(now[:2]),
+                                          float(-np.arctan2(now[3], now[2])), float(now[4]))
+        vehicle.LENGTH, vehicle.WIDTH = self.traffic.sizes[self.ego_index]
+        vehicle.action = {"acceleration": 0.0, "steering": 0.0}
+        self.road.vehicles = [vehicle]        # the others are recorded boxes, not road vehicles
+        return vehicle
+
+    @property
+    def ego(self):
+        return self.vehicle
+
+    @property
+    def time_s(self) -> float:
+        return self.start + self.steps * self.dt
+
+    @property
+    def done(self) -> bool:
+        return self.crashed or self.off_network or self.steps >= self.n_steps
+
+    def hand_over(self, history_s: float) -> tuple[object, Scene]:
+        """The recorded vehicle is planner-driven from the start; the planner is reset now."""
+        return self.vehicle, self.scene(history_s)
+
+    def scene(self, history_s: float) -> Scene:
+        """The planner's scene now; its history is `scene_config`'s, as for collected windows."""
+        return _ego_scene(self.traffic, self.ego_index, self.track_t, self.track, self.time_s,
+                          self.lanes, self.scene_config)
+
+    def ego_state(self) -> np.ndarray:
+        return self.track[-1]
+
+    def driven(self) -> tuple[np.ndarray, np.ndarray]:
+        """Times [S] and world states [S, 6] of the closed-loop steps."""
+        return (np.asarray(self.track_t[self.history_len:]),
+                np.asarray(self.track[self.history_len:]).reshape(-1, STATE_DIM))
+
+    def step(self) -> None:
+        prev = self.track[-1]
+        self.road.act()
+        self.road.step(self.dt)
+        self.steps += 1
+        xy = world_from_highway_env(self.vehicle.position)
+        heading = float(heading_from_highway_env(self.vehicle.heading))
+        prev_heading = float(np.arctan2(prev[3], prev[2]))
+        yaw_rate = ((heading - prev_heading + np.pi) % (2 * np.pi) - np.pi) / self.dt
+        self.track_t.append(self.time_s)
+        self.track.append(np.array([xy[0], xy[1], np.cos(heading), np.sin(heading),
+                                    float(self.vehicle.speed), yaw_rate]))
+        self._gaps = {}
+        near = self._near(self.config.gap_radius_m)
+        if near and min(gap for gap, _, _ in near) <= 0.0:
+            self.crashed = True
+            _, agent, other_xy = near[int(np.argmin([gap for gap, _, _ in near]))]
+            # Replayed traffic does not react: a vehicle behind may run into an ego that drives
+            # slower than the human did. Say which it was.
+            self.collision = {"other_id": int(self.traffic.ids[agent]), "other_ahead": bool(
+                ego_from_world(other_xy, xy, heading)[0] > 0)}
+            return
+        if _off_network(self.road, self.vehicle, self.config.off_road_margin_m):
+            self.off_network = True
+
+    def _near(self, radius_m: float) -> list[tuple[float, int, np.ndarray]]:
+        """(box gap, agent, position) of every recorded vehicle present within `radius_m` now."""
+        if radius_m not in self._gaps:
+            me_state, traffic = self.track[-1], self.traffic
+            rec, present = traffic.resample(self.others, np.array([self.time_s]))
+            me = box_corners(me_state[:2], me_state[2:4], *traffic.sizes[self.ego_index])
+            self._gaps[radius_m] = [
+                (box_gap(me, box_corners(rec[i, 0, :2], rec[i, 0, 2:4], *traffic.sizes[a])), a,
+                 rec[i, 0, :2])
+                for i, a in enumerate(self.others)
+                if present[i, 0] and np.linalg.norm(rec[i, 0, :2] - me_state[:2]) < radius_m]
+        return self._gaps[radius_m]
+
+    def min_gap(self, radius_m: float) -> float:
+        return min((gap for gap, _, _ in self._near(radius_m)), default=float("inf"))
+
+
+def _human_metrics(world: CommonRoadWorld) -> dict:
+    """Error against the recorded human, its distance, and Safety % over the driven steps."""
+    traffic, ego = world.traffic, world.ego_index
+    driven_t, driven = world.driven()
+    human, _ = traffic.resample(np.array([ego]), driven_t)
+    errors = [float(np.linalg.norm(mine - recorded))
+              for mine, recorded in zip(driven[:, :2], human[0, :, :2])]
+    # Safety % as on simulated scenes (riskmap.sim.metrics): every driven step, every other recorded
+    # vehicle within the encounter radius is an encounter, dangerous when close or about to touch.
+    other_states, other_present = traffic.resample(world.others, driven_t)
+    dangerous, encounters = dangerous_encounters(driven, np.asarray(traffic.sizes[ego]), other_states,
+                                                 other_present, np.asarray(traffic.sizes)[world.others],
+                                                 SafetyConfig())
+    human_path, _ = traffic.resample(np.array([ego]),
+                                     np.asarray(world.track_t[world.history_len - 1:]))
+    return {
+        "human_distance_m": float(np.linalg.norm(np.diff(human_path[0, :, :2], axis=0), axis=1).sum()),
+        "dangerous": dangerous, "encounters": encounters,
+        "safety_pct": safety_pct(dangerous, encounters),
+        "ade_m": float(np.mean(errors)) if errors else 0.0,
+        "goal_error_m": errors[-1] if errors else 0.0,
+    }
+
+
 def replay_commonroad_episode(scenario_path, ego_id: int, planner, start_s: float | None = None,
                               duration_s: float | None = None, config: ReplayConfig | None = None,
                               scene_config: CommonRoadSceneConfig | None = None) -> dict:
@@ -142,106 +286,23 @@ def replay_commonroad_episode(scenario_path, ego_id: int, planner, start_s: floa
     `duration_s`). `scene_config` sets what the planner sees (as for collected windows).
     """
     config = config or ReplayConfig()
-    scene_config = scene_config or CommonRoadSceneConfig()
     traffic = (scenario_path if isinstance(scenario_path, RecordedTraffic)
                else RecordedTraffic(load_scenario(scenario_path), Path(scenario_path).stem))
-    ego = traffic.index_of(ego_id)
-    first, last = traffic.span(ego)
-    dt = 1.0 / config.control_hz
-    t_first, t_last = first * traffic.dt_s, last * traffic.dt_s
-    start = t_first + config.history_s if start_s is None else float(start_s)
-    if not t_first <= start < t_last:
-        raise InputError(f"start {start:g} s is outside vehicle {ego_id}'s recording "
-                         f"({t_first:g}-{t_last:g} s of {traffic.name})")
-    end = t_last if duration_s is None else min(t_last, start + float(duration_s))
-    n_steps = int(np.floor((end - start) / dt + 1e-9))
-
-    # The ego's track: the recorded history up to the hand-over, then the closed loop.
-    hist_t = np.arange(max(t_first, start - config.history_s), start + 1e-9, dt)
-    hist, _ = traffic.resample(np.array([ego]), hist_t)
-    track_t, track = list(hist_t), list(hist[0])
-    road = road_from_lanelets(traffic.scenario.lanelet_network)
-    lanes = lanes_from_lanelets(traffic.scenario.lanelet_network)
-    now = track[-1]
-    vehicle = planned_vehicle_class()(
-        road, highway_env_from_world(now[:2]), float(-np.arctan2(now[3], now[2])), float(now[4]))
-    vehicle.LENGTH, vehicle.WIDTH = traffic.sizes[ego]
-    vehicle.action = {"acceleration": 0.0, "steering": 0.0}
-    road.vehicles = [vehicle]
-    controller = TrackingController(ControllerConfig())
-    replan_every = config.control_hz // config.replan_hz
-    plan_times, gaps, errors, speeds = [], [], [], []
-    collided = off_road = False
-    collision = None
-    distance, since_plan, t = 0.0, 0.0, start
-    others = np.array([a for a in range(len(traffic.ids)) if a != ego], dtype=np.int64)
-    planner.reset(_ego_scene(traffic, ego, track_t, track, t, lanes, scene_config))
-    for k in range(n_steps):
-        if k % replan_every == 0:
-            scene = _ego_scene(traffic, ego, track_t, track, t, lanes, scene_config)
-            started = time.perf_counter()
-            plan = check_plan(planner.plan(scene), type(planner).__name__)
-            plan_times.append(time.perf_counter() - started)
-            controller.set_plan(plan.waypoints, *ego_pose(scene))
-            since_plan = 0.0
-        state = track[-1]
-        accel, steer = controller.action(state[:2], float(np.arctan2(state[3], state[2])),
-                                         float(state[4]), since_plan, dt)
-        vehicle.command(accel, steer)
-        since_plan += dt
-        road.act()
-        road.step(dt)
-        t = start + (k + 1) * dt
-        xy = world_from_highway_env(vehicle.position)
-        heading = float(heading_from_highway_env(vehicle.heading))
-        prev_heading = float(np.arctan2(state[3], state[2]))
-        yaw_rate = ((heading - prev_heading + np.pi) % (2 * np.pi) - np.pi) / dt
-        new = np.array([xy[0], xy[1], np.cos(heading), np.sin(heading), float(vehicle.speed), yaw_rate])
-        distance += float(np.linalg.norm(new[:2] - state[:2]))
-        track_t.append(t)
-        track.append(new)
-        speeds.append(float(vehicle.speed))
-        human, _ = traffic.resample(np.array([ego]), np.array([t]))
-        errors.append(float(np.linalg.norm(new[:2] - human[0, 0, :2])))
-        rec, present = traffic.resample(others, np.array([t]))
-        me = box_corners(new[:2], new[2:4], *traffic.sizes[ego])
-        near = [(i, a) for i, a in enumerate(others)
-                if present[i, 0] and np.linalg.norm(rec[i, 0, :2] - new[:2]) < config.gap_radius_m]
-        step_gaps = [box_gap(me, box_corners(rec[i, 0, :2], rec[i, 0, 2:4], *traffic.sizes[a]))
-                     for i, a in near]
-        gaps.append(min(step_gaps, default=float("inf")))
-        if gaps[-1] <= 0.0:
-            collided = True
-            i, a = near[int(np.argmin(step_gaps))]
-            # Replayed traffic does not react: a vehicle behind may run into an ego that drives
-            # slower than the human did. Say which it was.
-            collision = {"other_id": int(traffic.ids[a]), "other_ahead": bool(
-                ego_from_world(rec[i, 0, :2], new[:2], heading)[0] > 0)}
-            break
-        if _off_network(road, vehicle, config.off_road_margin_m):
-            off_road = True
-            break
-    # Safety % as on simulated scenes (riskmap.sim.metrics): every driven step, every other recorded
-    # vehicle within the encounter radius is an encounter, dangerous when close or about to touch.
-    driven_t = np.asarray(track_t[len(hist_t):])
-    driven = np.asarray(track[len(hist_t):]).reshape(-1, 6)
-    other_states, other_present = traffic.resample(others, driven_t)
-    dangerous, encounters = dangerous_encounters(driven, np.asarray(traffic.sizes[ego]), other_states,
-                                                 other_present, np.asarray(traffic.sizes)[others],
-                                                 SafetyConfig())
-    human_path, _ = traffic.resample(np.array([ego]), np.asarray(track_t[len(hist_t) - 1:]))
-    human_distance = float(np.linalg.norm(np.diff(human_path[0, :, :2], axis=0), axis=1).sum())
+    world = CommonRoadWorld(traffic, ego_id, start_s, duration_s, config, scene_config)
+    loop = drive_world(world, planner, LoopConfig(world.n_steps, config.control_hz // config.replan_hz,
+                                                  config.history_s, config.gap_radius_m))
+    human = _human_metrics(world)
+    speeds, gaps, plan_times = loop.speeds, loop.gaps, loop.plan_times_s
     return {
         "scenario": traffic.name, "ego_id": int(ego_id), "planner": type(planner).__name__,
-        "start_s": round(start, 3), "simulated_s": round(t - start, 3),
-        "collided": collided, "collision": collision, "off_road": off_road, "distance_m": distance,
-        "human_distance_m": human_distance,
+        "start_s": round(world.start, 3), "simulated_s": round(world.time_s - world.start, 3),
+        "collided": world.crashed, "collision": world.collision, "off_road": world.off_network,
+        "distance_m": loop.distance_m, "human_distance_m": human["human_distance_m"],
         "mean_speed_mps": float(np.mean(speeds)) if speeds else 0.0,
         "min_gap_m": float(min(gaps)) if gaps else float("inf"),
-        "dangerous": dangerous, "encounters": encounters,
-        "safety_pct": safety_pct(dangerous, encounters),
-        "ade_m": float(np.mean(errors)) if errors else 0.0,
-        "goal_error_m": errors[-1] if errors else 0.0,
+        "dangerous": human["dangerous"], "encounters": human["encounters"],
+        "safety_pct": human["safety_pct"], "ade_m": human["ade_m"],
+        "goal_error_m": human["goal_error_m"],
         "plan_ms_median": 1000 * float(np.median(plan_times)) if plan_times else None,
         "plan_calls": len(plan_times),
     }

@@ -11,6 +11,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rasterize.config import family_of_env
+from rasterize.frames import box_corners
+from rasterize.geometry import box_gap
+from rasterize.scene import Scene
+from riskmap.sim.control import hand_over_to_planner
 
 
 @dataclass(frozen=True)
@@ -113,6 +117,19 @@ def _off_network(road, vehicle, margin_m: float = 1.0) -> bool:
     return not lane.on_lane(vehicle.position, margin=margin_m)
 
 
+def _box(vehicle) -> np.ndarray:
+    return box_corners(vehicle.position, [np.cos(vehicle.heading), np.sin(vehicle.heading)],
+                       vehicle.LENGTH, vehicle.WIDTH)
+
+
+def min_gap_on_road(road, ego, radius_m: float) -> float:
+    """Smallest box gap from `ego` to the other vehicles on `road` within `radius_m`."""
+    me = _box(ego)
+    gaps = [box_gap(me, _box(v)) for v in road.vehicles
+            if v is not ego and np.linalg.norm(v.position - ego.position) < radius_m]
+    return min(gaps, default=float("inf"))
+
+
 _CLASS_DEFAULTS: dict = {}
 
 
@@ -152,6 +169,7 @@ class Episode:
     `step()` advances the road by 1 / rate_hz seconds: every vehicle acts (the ego too, whatever
     vehicle drives it), then once a second vehicles far from the ego are dropped and, where the
     family has a spawner, new traffic arrives. `done` once the ego crashed or left the network.
+    A `riskmap.sim.world.World`: the planner's scenes come from the recorder.
     """
 
     def __init__(self, env, env_id: str, seed: int, episode: int, rate_hz: int = 10,
@@ -161,6 +179,7 @@ class Episode:
         from rasterize.highway import TrafficRecorder
 
         self.env, self.base = env, env.unwrapped
+        self.env_id = env_id
         self.setup = FAMILY_SETUPS[family_of_env(env_id)]
         self.seed = episode_seed(seed, episode)
         restore_vehicle_class_defaults()
@@ -186,6 +205,21 @@ class Episode:
     @property
     def done(self) -> bool:
         return self.crashed or self.off_network
+
+    def hand_over(self, history_s: float) -> tuple[object, Scene]:
+        """The ego becomes a `PlannedVehicle` at its state; the planner is reset with the scene
+        of the first recorded step."""
+        vehicle = hand_over_to_planner(self)
+        return vehicle, self.recorder.scene(0, history_s, 0.0)
+
+    def scene(self, history_s: float) -> Scene:
+        return self.recorder.scene(self.recorder.num_steps - 1, history_s, 0.0, source=self.env_id)
+
+    def ego_state(self) -> np.ndarray:
+        return self.recorder.latest_state(self.recorder.ego_id)
+
+    def min_gap(self, radius_m: float) -> float:
+        return min_gap_on_road(self.base.road, self.ego, radius_m)
 
     def replace_ego(self, vehicle) -> None:
         """Hand the ego over to another vehicle object at the same state (same recorded agent)."""

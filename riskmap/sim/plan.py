@@ -2,7 +2,7 @@
 
 Every planner that can drive the ego implements `reset(scene)` and `plan(scene) -> Plan`; the
 rollout (`riskmap.sim.rollout`) replans at 2 Hz and tracks the waypoints with a controller.
-`HumanDriver` marks the IDM/MOBIL ego, which drives itself and makes no plan.
+`HumanDriver` marks the IDM/MOBIL ego, which drives itself (`drives_itself`) and makes no plan.
 """
 
 from __future__ import annotations
@@ -54,3 +54,4 @@ class HumanDriver:
     """Marker for `idm`: the simulator's IDM/MOBIL ego keeps driving itself."""
 
     name = "idm"
+    drives_itself = True     # the rollout neither hands the ego over nor asks for plans

@@ -1,8 +1,10 @@
 """The rollout: one closed-loop episode with any planner driving the ego.
 
-The world is an `Episode` (highway-env traffic, or `LogReplayEpisode` replaying a record); for
-a planner the ego is handed over at t = 0 to a vehicle that a tracking controller drives at
-`control_hz`, replanning at `replan_hz` from the recorded 2 s history.
+`drive_world` is the one loop, on any `riskmap.sim.world.World`: an `Episode` (highway-env
+traffic, or `LogReplayEpisode` replaying a record) or a `CommonRoadWorld` (a CommonRoad
+recording). For a planner the ego is handed over at the start to a vehicle that a tracking
+controller drives at the control rate, replanning at `replan_hz` from a 2 s history.
+`drive_episode` drives an `Episode` and reports the highway-env metrics.
 """
 
 from __future__ import annotations
@@ -15,11 +17,10 @@ import numpy as np
 
 from rasterize.config import family_of_env
 from rasterize.errors import InputError
-from rasterize.frames import box_corners, ego_pose
-from rasterize.geometry import box_gap
-from riskmap.sim.control import ControllerConfig, TrackingController, hand_over_to_planner
+from rasterize.frames import ego_pose
+from riskmap.sim.control import ControllerConfig, TrackingController
 from riskmap.sim.episode import FAMILY_SETUPS, Episode
-from riskmap.sim.plan import HumanDriver, check_plan
+from riskmap.sim.plan import check_plan
 
 
 @dataclass(frozen=True)
@@ -41,23 +42,15 @@ class DriveConfig:
             raise InputError("control_hz must be a multiple of replan_hz")
 
 
-def _min_gap(road, ego, radius: float) -> float:
-    me = box_corners(ego.position, [np.cos(ego.heading), np.sin(ego.heading)], ego.LENGTH,
-                     ego.WIDTH)
-    gaps = [box_gap(me, box_corners(v.position, [np.cos(v.heading), np.sin(v.heading)], v.LENGTH,
-                                    v.WIDTH))
-            for v in road.vehicles
-            if v is not ego and np.linalg.norm(v.position - ego.position) < radius]
-    return min(gaps, default=float("inf"))
-
-
 @dataclass(frozen=True)
 class DriveHooks:
-    """Optional callbacks into one closed-loop episode; the defaults drive it unchanged.
+    """Optional callbacks into one closed-loop episode; the defaults drive it unchanged. `run` is
+    the world driven (the `Episode` for `drive_episode`).
 
-    setup(base_env): rearrange the road before the first record (initial conditions).
-    on_reset(run): once the `Episode` is reset, before the ego is handed to the planner.
-    on_ready: callables run with the `Episode` once the ego is set up (after the planner's own
+    setup(base_env): rearrange the road before the first record (initial conditions; used where
+        `drive_episode` makes the `Episode`).
+    on_reset(run): once the world is reset, before the ego is handed to the planner.
+    on_ready: callables run with the world once the ego is set up (after the planner's own
         `attach(run)`, if it has one), e.g. to script other traffic.
     perceive(scene, step) -> scene: what the planner is shown instead of the recorded scene
         (perception degradation); frames still show the recorded scene.
@@ -74,6 +67,99 @@ class DriveHooks:
     on_step: Callable | None = None
 
 
+@dataclass(frozen=True)
+class LoopConfig:
+    """How `drive_world` drives: at most `steps` steps, a new plan every `replan_every`."""
+
+    steps: int
+    replan_every: int
+    history_s: float = 2.0
+    gap_radius_m: float = 40.0         # others farther than this do not count for the min gap
+
+
+@dataclass
+class LoopRecord:
+    """What `drive_world` measured; per-step lists hold one entry per step driven."""
+
+    drives_itself: bool                # the planner was the world's own ego (no plans)
+    distance_m: float
+    speeds: list[float]
+    gaps: list[float]
+    plan_times_s: list[float]
+
+
+def drives_itself(planner) -> bool:
+    """A planner that declares `drives_itself` (`HumanDriver`) keeps the world's ego driving."""
+    return bool(getattr(planner, "drives_itself", False))
+
+
+class _Tracker:
+    """Replans every `replan_every` steps and turns the plan into the ego's command each step."""
+
+    def __init__(self, world, planner, vehicle, config: LoopConfig, hooks: DriveHooks):
+        self.world, self.planner, self.vehicle = world, planner, vehicle
+        self.config, self.hooks = config, hooks
+        self.controller = TrackingController(ControllerConfig())
+        self.since_plan = 0.0
+        self.plan_times: list[float] = []
+
+    def _replan(self, k: int) -> None:
+        world, hooks = self.world, self.hooks
+        scene = world.scene(self.config.history_s)
+        seen = scene if hooks.perceive is None else hooks.perceive(scene, k)
+        started = time.perf_counter()
+        plan = check_plan(self.planner.plan(seen), type(self.planner).__name__)
+        self.plan_times.append(time.perf_counter() - started)
+        # The plan is pinned to where the ego really is, not where a degraded scene shows it.
+        origin, heading = ego_pose(scene)
+        self.controller.set_plan(plan.waypoints, origin, heading)
+        self.since_plan = 0.0
+        if hooks.on_plan is not None:
+            hooks.on_plan(world, scene, plan, k)
+
+    def command(self, k: int) -> None:
+        if k % self.config.replan_every == 0:
+            self._replan(k)
+        dt = self.world.dt
+        state = self.world.ego_state()
+        accel, steer = self.controller.action(state[:2], float(np.arctan2(state[3], state[2])),
+                                              float(state[4]), self.since_plan, dt)
+        self.vehicle.command(accel, steer)
+        self.since_plan += dt
+
+
+def drive_world(world, planner, config: LoopConfig, hooks: DriveHooks = DriveHooks()) -> LoopRecord:
+    """The closed loop on any `riskmap.sim.world.World`: hand the ego to `planner` (unless it
+    drives itself), then step until `config.steps` or the world is done (`hooks`: `DriveHooks`,
+    whose `setup` belongs to the world's construction and is not used here)."""
+    if hooks.on_reset is not None:
+        hooks.on_reset(world)
+    human = drives_itself(planner)
+    tracker = None
+    if not human:
+        vehicle, first = world.hand_over(config.history_s)
+        planner.reset(first)
+        tracker = _Tracker(world, planner, vehicle, config, hooks)
+    if hasattr(planner, "attach"):
+        planner.attach(world)
+    for hook in hooks.on_ready:
+        hook(world)
+    distance, speeds, gaps = 0.0, [], []
+    for k in range(config.steps):
+        if tracker is not None:
+            tracker.command(k)
+        before = world.ego.position.copy()
+        world.step()
+        distance += float(np.linalg.norm(world.ego.position - before))
+        speeds.append(float(world.ego.speed))
+        gaps.append(world.min_gap(config.gap_radius_m))
+        if hooks.on_step is not None:
+            hooks.on_step(world)
+        if world.done:
+            break
+    return LoopRecord(human, distance, speeds, gaps, [] if tracker is None else tracker.plan_times)
+
+
 def drive_episode(env, planner, config: DriveConfig, episode: int, hooks: DriveHooks = DriveHooks(),
                   run: Episode | None = None) -> dict:
     """Drive one closed-loop episode; `hooks` perturb or observe it (see `DriveHooks`). `run`: an
@@ -82,56 +168,15 @@ def drive_episode(env, planner, config: DriveConfig, episode: int, hooks: DriveH
     if run is None:
         run = Episode(env, config.env_id, config.seed, episode, config.control_hz,
                       setup=hooks.setup)
-    if hooks.on_reset is not None:
-        hooks.on_reset(run)
-    human = isinstance(planner, HumanDriver)
-    controller = TrackingController(ControllerConfig())
-    plan_times, gaps, speeds = [], [], []
-    since_plan = 0.0
-    replan_every = config.control_hz // config.replan_hz
-    if not human:
-        vehicle = hand_over_to_planner(run)
-        planner.reset(run.recorder.scene(0, config.history_s, 0.0))
-    if hasattr(planner, "attach"):
-        planner.attach(run)
-    for hook in hooks.on_ready:
-        hook(run)
-    distance = 0.0
-    n_steps = int(round(config.episode_s * config.control_hz))
-    for k in range(n_steps):
-        ego = run.ego
-        if not human:
-            if k % replan_every == 0:
-                scene = run.recorder.scene(run.recorder.num_steps - 1, config.history_s, 0.0,
-                                           source=config.env_id)
-                seen = scene if hooks.perceive is None else hooks.perceive(scene, k)
-                started = time.perf_counter()
-                plan = check_plan(planner.plan(seen), type(planner).__name__)
-                plan_times.append(time.perf_counter() - started)
-                origin, heading = ego_pose(scene)
-                controller.set_plan(plan.waypoints, origin, heading)
-                since_plan = 0.0
-                if hooks.on_plan is not None:
-                    hooks.on_plan(run, scene, plan, k)
-            state = run.recorder.latest_state(run.recorder.ego_id)
-            accel, steer = controller.action(state[:2], float(np.arctan2(state[3], state[2])),
-                                             float(state[4]), since_plan, run.dt)
-            vehicle.command(accel, steer)
-            since_plan += run.dt
-        before = ego.position.copy()
-        run.step()
-        distance += float(np.linalg.norm(run.ego.position - before))
-        speeds.append(float(run.ego.speed))
-        gaps.append(_min_gap(run.base.road, run.ego, config.gap_radius_m))
-        if hooks.on_step is not None:
-            hooks.on_step(run)
-        if run.done:
-            break
+    loop = LoopConfig(round(config.episode_s * config.control_hz),
+                      config.control_hz // config.replan_hz, config.history_s, config.gap_radius_m)
+    record = drive_world(run, planner, loop, hooks)
+    plan_times, speeds, gaps = record.plan_times_s, record.speeds, record.gaps
     return {
         "episode": episode, "env_seed": run.seed, "driver": run.driver,
-        "planner": "idm" if human else type(planner).__name__,
+        "planner": "idm" if record.drives_itself else type(planner).__name__,
         "collided": run.crashed, "off_road": run.off_network,
-        "simulated_s": round(run.time_s, 3), "distance_m": distance,
+        "simulated_s": round(run.time_s, 3), "distance_m": record.distance_m,
         "mean_speed_mps": float(np.mean(speeds)) if speeds else 0.0,
         "min_gap_m": float(min(gaps)) if gaps else float("inf"),
         "plan_ms_median": 1000 * float(np.median(plan_times)) if plan_times else None,

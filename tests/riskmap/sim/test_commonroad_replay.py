@@ -13,8 +13,14 @@ from rasterize.commonroad import RecordedTraffic, load_scenario
 from rasterize.errors import InputError
 from rasterize.frames import world_from_highway_env
 from riskmap.planner.baselines import ConstantVelocityPlanner
-from riskmap.sim.commonroad_replay import RecordedFuturePlanner, replay_commonroad_episode, road_from_lanelets
+from riskmap.sim.commonroad_replay import (
+    CommonRoadWorld,
+    RecordedFuturePlanner,
+    replay_commonroad_episode,
+    road_from_lanelets,
+)
 from riskmap.sim.plan import Plan
+from riskmap.sim.rollout import DriveHooks, LoopConfig, drive_world
 
 RECORDING = Path(__file__).resolve().parents[2] / "fixtures" / "commonroad" / "USA_US101-4_1_T-1.xml"
 
@@ -61,6 +67,27 @@ def test_a_planner_that_ignores_the_slowing_leader_collides(traffic):
     assert result["collision"] == {"other_id": 468, "other_ahead": True}
     assert result["simulated_s"] < 8.0
     assert result["ade_m"] > 1.0
+
+
+def test_the_rollout_loop_drives_a_commonroad_world(traffic):
+    # The loop shared with highway-env episodes: the recorded future, tracked from wherever the
+    # ego is, stays close to the human all the way to the end of the recording.
+    world = CommonRoadWorld(traffic, 475)
+    steps = []
+    loop = drive_world(world, RecordedFuturePlanner(traffic, 475), LoopConfig(world.n_steps, 5),
+                       DriveHooks(on_step=lambda w: steps.append(w.steps)))
+    assert world.done and not world.crashed and not world.off_network
+    assert steps == list(range(1, world.n_steps + 1)) and world.n_steps == 80
+    assert len(loop.plan_times_s) == 16 and not loop.drives_itself
+    t, driven = world.driven()
+    assert np.allclose(t, world.start + world.dt * np.arange(1, 81))
+    human, _ = traffic.resample(np.array([world.ego_index]), t)
+    errors = np.linalg.norm(driven[:, :2] - human[0, :, :2], axis=1)
+    assert errors.mean() < 2.0 and errors.max() < 3.0
+    assert loop.distance_m == pytest.approx(np.linalg.norm(np.diff(
+        np.asarray(world.track)[world.history_len - 1:, :2], axis=0), axis=1).sum())
+    assert min(loop.gaps) == pytest.approx(replay_commonroad_episode(
+        traffic, 475, RecordedFuturePlanner(traffic, 475))["min_gap_m"])
 
 
 class _StopPlanner:
