@@ -1,10 +1,14 @@
-"""What every command line of the toolkit shares: argument types and the one way `main` reports
-errors (one line, exit 2, for bad input; 130 on Ctrl-C, finished work kept)."""
+"""What every command line of the toolkit shares: argument types, options made from the config
+dataclasses (`add_config_options` / `config_from_args`: the dataclass holds each default once), and
+the one way `main` reports errors (one line, exit 2, for bad input; 130 on Ctrl-C, work kept)."""
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
+import types
+import typing
 
 from rasterize.errors import InputError
 
@@ -31,3 +35,55 @@ def run_command(prog: str, parser: argparse.ArgumentParser, argv: list[str] | No
     except KeyboardInterrupt:
         print(f"{prog}: interrupted; finished work is kept, rerun with --resume", file=sys.stderr)
         return 130
+
+
+def comma_list(text: str) -> tuple[str, ...]:
+    """`a,b,c` -> ("a", "b", "c"); empty items dropped."""
+    return tuple(item.strip() for item in text.split(",") if item.strip())
+
+
+def _option_type(hint):
+    """The argparse type for a config field's annotation (X | None -> X; tuple[str, ...] -> a
+    comma-separated list)."""
+    args = [a for a in typing.get_args(hint) if a is not type(None)]
+    if typing.get_origin(hint) in (typing.Union, types.UnionType) and len(args) == 1:
+        return _option_type(args[0])
+    if typing.get_origin(hint) is tuple:
+        return comma_list
+    return hint if hint in (int, float, str) else str
+
+
+def add_config_options(parser: argparse.ArgumentParser, config_type: type, *names: str,
+                       flags: dict[str, str] | None = None, help: dict[str, str] | None = None,
+                       option_types: dict | None = None) -> None:
+    """Add `--field-name` options for fields `names` of the frozen config dataclass `config_type`:
+    type and default come from the dataclass (one source of truth), help from `help` or the field's
+    `metadata["help"]`. `flags` renames an option, `option_types` overrides its argparse type (e.g.
+    `positive_int`). Read them back with `config_from_args`."""
+    flags, help, option_types = flags or {}, help or {}, option_types or {}
+    hints = typing.get_type_hints(config_type)
+    by_name = {f.name: f for f in dataclasses.fields(config_type)}
+    for name in names:
+        if name not in by_name:
+            raise ValueError(f"{config_type.__name__} has no field {name!r}")
+        field = by_name[name]
+        if field.default is not dataclasses.MISSING:
+            default, required = field.default, False
+        elif field.default_factory is not dataclasses.MISSING:
+            default, required = field.default_factory(), False
+        else:
+            default, required = None, True
+        kwargs = {"dest": name, "type": option_types.get(name, _option_type(hints[name])),
+                  "help": help.get(name, field.metadata.get("help"))}
+        if required:
+            kwargs["required"] = True
+        else:
+            kwargs["default"] = default
+        parser.add_argument(flags.get(name, "--" + name.replace("_", "-")), **kwargs)
+
+
+def config_from_args(config_type: type, args: argparse.Namespace, **overrides):
+    """`config_type` from the options `add_config_options` added (and `overrides`)."""
+    values = {f.name: getattr(args, f.name) for f in dataclasses.fields(config_type)
+              if hasattr(args, f.name)}
+    return config_type(**{**values, **overrides})

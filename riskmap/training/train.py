@@ -11,7 +11,7 @@ from __future__ import annotations
 import csv
 import math
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -23,51 +23,10 @@ from riskmap.data.dataset import DemoDataset, PerturbedEgo
 from riskmap.infra.atomic import atomic_write
 from riskmap.infra.checkpoint import read_sidecar, save_checkpoint
 from riskmap.infra.rundir import refuse_unless_resume
-from riskmap.planner.irl import IRLConfig, demo_negative_log_likelihood, irl_step
+from riskmap.planner.irl import demo_negative_log_likelihood, irl_step
 from riskmap.planner.model import ModelConfig, RiskMapGenerator, load_backbone_weights
 from riskmap.planner.sampler import SamplerConfig, sample_trajectory
-
-
-@dataclass(frozen=True)
-class TrainConfig:
-    """Training run settings. Distances in metres, sigmas in metres, goal variance in cells²."""
-
-    data: str
-    out: str
-    resolution: int = 50
-    uncertainty_weight: float = 1.0
-    sigma_x: float = 0.5
-    sigma_y: float = 1.5
-    goal_variance: float = 5.0
-    goal: str = "route"
-    epochs: int = 10
-    batch_size: int = 32
-    lr: float = 1e-4
-    grad_clip: float = 10.0
-    horizon: int | None = None          # value-iteration steps; default 1.6 × resolution
-    gamma: float = 1.0
-    val_fraction: float = 0.15          # share of episodes held out
-    val_ade_windows: int = 128          # validation windows on which the sampler runs
-    augment_probability: float = 0.5    # share of training windows with a perturbed ego pose
-    augment_heading_deg: float = 10.0
-    augment_lateral_m: float = 1.0
-    seed: int = 0
-    device: str = "auto"
-    backbone_weights: str | None = None
-    max_windows: int | None = None      # cap on training windows (smoke tests)
-
-    def __post_init__(self) -> None:
-        for name in ("epochs", "batch_size", "resolution"):
-            if getattr(self, name) < 1:
-                raise InputError(f"--{name.replace('_', '-')} must be positive")
-        if self.horizon is None:
-            object.__setattr__(self, "horizon", int(round(1.6 * self.resolution)))
-        if not 0 < self.val_fraction < 1:
-            raise InputError(f"val_fraction must be in (0, 1), got {self.val_fraction}")
-
-    @property
-    def irl(self) -> IRLConfig:
-        return IRLConfig(self.horizon, self.gamma, self.uncertainty_weight, self.goal_variance)
+from riskmap.training.config import TrainConfig
 
 
 def resolve_device(name: str) -> torch.device:

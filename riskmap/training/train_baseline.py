@@ -11,7 +11,7 @@ from __future__ import annotations
 import csv
 import math
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -25,33 +25,9 @@ from riskmap.data.dataset import DemoDataset
 from riskmap.infra.atomic import atomic_write
 from riskmap.infra.checkpoint import read_sidecar, save_checkpoint
 from riskmap.infra.rundir import refuse_unless_resume
-from riskmap.planner.bc import CHECKPOINT_KIND, BCConfig, BCNet, bc_inputs, normalise_kind
+from riskmap.planner.bc import CHECKPOINT_KIND, BCConfig, BCNet, bc_inputs
+from riskmap.training.config import BaselineTrainConfig
 from riskmap.training.train import split_episodes
-
-
-@dataclass(frozen=True)
-class BaselineTrainConfig:
-    """A baseline training run. Angles in degrees, offsets in metres."""
-
-    kind: str
-    data: str
-    out: str
-    epochs: int = 4
-    batch_size: int = 32
-    lr: float = 3e-4
-    history_frames: int = 4             # cnn_lstm only
-    val_fraction: float = 0.15
-    augment_probability: float = 0.5    # as the risk-map planner's training
-    augment_heading_deg: float = 10.0
-    augment_lateral_m: float = 1.0
-    seed: int = 0
-    max_windows: int | None = None      # cap on training windows (quick runs)
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "kind", normalise_kind(self.kind))
-        for name in ("epochs", "batch_size", "history_frames"):
-            if getattr(self, name) < 1:
-                raise InputError(f"--{name.replace('_', '-')} must be positive")
 
 
 class BCWindows(Dataset):

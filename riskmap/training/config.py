@@ -1,0 +1,84 @@
+"""The settings of a training run, light to import (the command line builds its options from
+them: `riskmap.infra.cli.add_config_options`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from rasterize.errors import InputError
+
+
+def _normalise_kind(kind: str) -> str:
+    from riskmap.planner.bc import normalise_kind
+
+    return normalise_kind(kind)
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Training run settings. Distances in metres, sigmas in metres, goal variance in cells²."""
+
+    data: str
+    out: str
+    resolution: int = 50
+    uncertainty_weight: float = 1.0
+    sigma_x: float = 0.5
+    sigma_y: float = 1.5
+    goal_variance: float = 5.0
+    goal: str = "route"
+    epochs: int = 10
+    batch_size: int = 32
+    lr: float = 1e-4
+    grad_clip: float = 10.0
+    horizon: int | None = None          # value-iteration steps; default 1.6 × resolution
+    gamma: float = 1.0
+    val_fraction: float = 0.15          # share of episodes held out
+    val_ade_windows: int = 128          # validation windows on which the sampler runs
+    augment_probability: float = 0.5    # share of training windows with a perturbed ego pose
+    augment_heading_deg: float = 10.0
+    augment_lateral_m: float = 1.0
+    seed: int = 0
+    device: str = "auto"
+    backbone_weights: str | None = None
+    max_windows: int | None = None      # cap on training windows (smoke tests)
+
+    def __post_init__(self) -> None:
+        for name in ("epochs", "batch_size", "resolution"):
+            if getattr(self, name) < 1:
+                raise InputError(f"--{name.replace('_', '-')} must be positive")
+        if self.horizon is None:
+            object.__setattr__(self, "horizon", int(round(1.6 * self.resolution)))
+        if not 0 < self.val_fraction < 1:
+            raise InputError(f"val_fraction must be in (0, 1), got {self.val_fraction}")
+
+    @property
+    def irl(self):
+        """The IRL settings of this run (riskmap.planner.irl.IRLConfig)."""
+        from riskmap.planner.irl import IRLConfig
+
+        return IRLConfig(self.horizon, self.gamma, self.uncertainty_weight, self.goal_variance)
+
+
+@dataclass(frozen=True)
+class BaselineTrainConfig:
+    """A baseline training run. Angles in degrees, offsets in metres."""
+
+    kind: str
+    data: str
+    out: str
+    epochs: int = 4
+    batch_size: int = 32
+    lr: float = 3e-4
+    history_frames: int = 4             # cnn_lstm only
+    val_fraction: float = 0.15
+    augment_probability: float = 0.5    # as the risk-map planner's training
+    augment_heading_deg: float = 10.0
+    augment_lateral_m: float = 1.0
+    seed: int = 0
+    max_windows: int | None = None      # cap on training windows (quick runs)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "kind", _normalise_kind(self.kind))
+        for name in ("epochs", "batch_size", "history_frames"):
+            if getattr(self, name) < 1:
+                raise InputError(f"--{name.replace('_', '-')} must be positive")
