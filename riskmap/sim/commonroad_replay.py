@@ -38,8 +38,7 @@ from rasterize.frames import (
 from rasterize.geometry import box_gap
 from rasterize.scene import STATE_DIM, Scene
 from riskmap.sim.control import planned_vehicle_class
-from riskmap.sim.episode import _off_network
-from riskmap.sim.metrics import SafetyConfig, dangerous_encounters, safety_pct
+from riskmap.sim.metrics import SafetyConfig, centre_off_lane, dangerous_encounters, safety_pct
 from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, Plan
 from riskmap.sim.rollout import LoopConfig, drive_world
 
@@ -232,7 +231,7 @@ class CommonRoadWorld:
             self.collision = {"other_id": int(self.traffic.ids[agent]), "other_ahead": bool(
                 ego_from_world(other_xy, xy, heading)[0] > 0)}
             return
-        if _off_network(self.road, self.vehicle, self.config.off_road_margin_m):
+        if centre_off_lane(self.road, self.vehicle, self.config.off_road_margin_m):
             self.off_network = True
 
     def _near(self, radius_m: float) -> list[tuple[float, int, np.ndarray]]:

@@ -11,10 +11,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rasterize.config import family_of_env
-from rasterize.frames import box_corners
-from rasterize.geometry import box_gap
 from rasterize.scene import Scene
 from riskmap.sim.control import hand_over_to_planner
+from riskmap.sim.metrics import centre_off_lane, min_box_gap, vehicle_box
 
 
 @dataclass(frozen=True)
@@ -106,28 +105,10 @@ def _install_human_ego(base, rng: np.random.Generator, setup: FamilySetup) -> di
     return params
 
 
-def _off_network(road, vehicle, margin_m: float = 1.0) -> bool:
-    """True once the vehicle is off every lane (past the end of the road, or off it sideways).
-
-    highway-env's own `on_road` checks only the vehicle's assigned lane, which flickers at
-    junctions of the roundabout; the nearest lane of the whole network does not.
-    """
-    lane = road.network.get_lane(road.network.get_closest_lane_index(vehicle.position,
-                                                                     vehicle.heading))
-    return not lane.on_lane(vehicle.position, margin=margin_m)
-
-
-def _box(vehicle) -> np.ndarray:
-    return box_corners(vehicle.position, [np.cos(vehicle.heading), np.sin(vehicle.heading)],
-                       vehicle.LENGTH, vehicle.WIDTH)
-
-
 def min_gap_on_road(road, ego, radius_m: float) -> float:
     """Smallest box gap from `ego` to the other vehicles on `road` within `radius_m`."""
-    me = _box(ego)
-    gaps = [box_gap(me, _box(v)) for v in road.vehicles
-            if v is not ego and np.linalg.norm(v.position - ego.position) < radius_m]
-    return min(gaps, default=float("inf"))
+    return min_box_gap(vehicle_box(ego), (vehicle_box(v) for v in road.vehicles
+                                          if v is not ego and np.linalg.norm(v.position - ego.position) < radius_m))
 
 
 _CLASS_DEFAULTS: dict = {}
@@ -239,7 +220,7 @@ class Episode:
             self.crashed = True
             return
         if self.steps % self.rate_hz == 0:
-            if _off_network(road, ego):
+            if centre_off_lane(road, ego):
                 self.off_network = True
                 return
             road.vehicles = [v for v in road.vehicles if v is ego or

@@ -19,7 +19,8 @@ from rasterize.errors import InputError
 from rasterize.frames import ego_from_world, heading_angle, highway_env_from_world, world_from_highway_env
 from rasterize.scene import Scene
 from riskmap.infra.atomic import write_npz
-from riskmap.sim.episode import Episode, _off_network
+from riskmap.sim.episode import Episode
+from riskmap.sim.metrics import centre_off_lane
 from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, Plan
 
 
@@ -198,7 +199,7 @@ class LogReplayEpisode(Episode):
             self.crashed = True
             return
         if self.steps % self.rate_hz == 0:
-            self.off_network = _off_network(road, ego)
+            self.off_network = centre_off_lane(road, ego)
 
 
 class ReplayPlanner:
