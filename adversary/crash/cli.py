@@ -7,19 +7,18 @@ import argparse
 import json
 from pathlib import Path
 
-from riskmap.infra.cli import positive_int
+from adversary.crash.config import TrainSelectorConfig, TrainTrafficConfig
+from riskmap.infra.cli import add_config_options, config_from_args, positive_int
 
 
 def _run_train_traffic(args: argparse.Namespace) -> int:
     import torch
 
-    from adversary.crash.train_traffic import TrainTrafficConfig, train_traffic
+    from adversary.crash.train_traffic import train_traffic
 
     if args.threads:
         torch.set_num_threads(args.threads)
-    config = TrainTrafficConfig(epochs=args.epochs, batch_size=args.batch_size, lr=args.lr,
-                                kl_weight=args.kl_weight, free_bits=args.free_bits, seed=args.seed,
-                                max_windows_per_episode=args.max_windows_per_episode)
+    config = config_from_args(TrainTrafficConfig, args)
     summary = train_traffic([Path(d) for d in args.data], Path(args.out), config, resume=args.resume,
                             progress=not args.quiet)
     print(json.dumps(summary["val"], indent=1))
@@ -34,14 +33,12 @@ def add_parsers(subparsers) -> None:
     p.add_argument("--data", action="append", required=True,
                    help="a dataset from `riskmap collect` (repeat for several)")
     p.add_argument("--out", required=True, help="run directory (best.safetensors, log.jsonl, summary.json)")
-    p.add_argument("--epochs", type=positive_int, default=30)
-    p.add_argument("--batch-size", type=positive_int, default=32)
-    p.add_argument("--lr", type=float, default=1e-3)
-    p.add_argument("--kl-weight", type=float, default=0.05)
-    p.add_argument("--free-bits", type=float, default=2.0, help="nats of KL per agent left unpenalised")
-    p.add_argument("--max-windows-per-episode", type=int, default=0,
-                   help="use at most this many windows of each episode (0: all)")
-    p.add_argument("--seed", type=int, default=0)
+    add_config_options(p, TrainTrafficConfig, "epochs", "batch_size", "lr", "kl_weight", "free_bits",
+                       "max_windows_per_episode", "seed",
+                       help={"free_bits": "nats of KL per agent left unpenalised",
+                             "max_windows_per_episode": "use at most this many windows of each episode "
+                                                        "(0: all)"},
+                       option_types={"epochs": positive_int, "batch_size": positive_int})
     p.add_argument("--threads", type=int, default=0, help="torch CPU threads (0: torch's default)")
     p.add_argument("--resume", action="store_true")
     p.add_argument("--quiet", action="store_true")
@@ -51,12 +48,10 @@ def add_parsers(subparsers) -> None:
 def _run_train_selector(args: argparse.Namespace) -> int:
     import torch
 
-    from adversary.crash.train_selector import TrainSelectorConfig, train_selector
+    from adversary.crash.train_selector import train_selector
 
     torch.set_num_threads(args.threads or 1)
-    config = TrainSelectorConfig(label_iterations=args.label_iterations, max_scenes=args.max_scenes,
-                                 windows_per_episode=args.windows_per_episode, epochs=args.epochs,
-                                 seed=args.seed)
+    config = config_from_args(TrainSelectorConfig, args)
     summary = train_selector(Path(args.traffic_model), [Path(d) for d in args.data], Path(args.out), config,
                              resume=args.resume, progress=not args.quiet)
     print(json.dumps({k: summary[k] for k in ("selector_mam", "selector_no_mam", "val_baselines")}, indent=1))
@@ -114,11 +109,10 @@ def add_attack_parsers(subparsers) -> None:
     p.add_argument("--traffic-model", required=True, help="checkpoint from `adversary train-traffic`")
     p.add_argument("--data", action="append", required=True, help="training dataset (repeatable)")
     p.add_argument("--out", required=True)
-    p.add_argument("--label-iterations", type=positive_int, default=60)
-    p.add_argument("--max-scenes", type=positive_int, default=250)
-    p.add_argument("--windows-per-episode", type=positive_int, default=4)
-    p.add_argument("--epochs", type=positive_int, default=300)
-    p.add_argument("--seed", type=int, default=0)
+    add_config_options(p, TrainSelectorConfig, "label_iterations", "max_scenes", "windows_per_episode",
+                       "epochs", "seed",
+                       option_types={name: positive_int for name in ("label_iterations", "max_scenes",
+                                                                     "windows_per_episode", "epochs")})
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--resume", action="store_true")
     p.add_argument("--quiet", action="store_true")

@@ -19,13 +19,14 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 import torch
 
 from adversary.crash.batch import collate
+from adversary.crash.config import TrainSelectorConfig
 from adversary.crash.features import SceneTensors
 from adversary.crash.generate import GenerationConfig, attack_loss, generate, logged_ego_future
 from adversary.crash.selection import SelectionModule, candidates, distance_weights
@@ -35,17 +36,6 @@ from riskmap.infra.checkpoint import load_weights, read_sidecar, save_checkpoint
 from riskmap.infra.rundir import refuse_unless_resume
 
 CHECKPOINT_KIND = "crash_selector"
-
-
-@dataclass(frozen=True)
-class TrainSelectorConfig:
-    label_iterations: int = 60      # short generation per candidate
-    max_scenes: int = 250
-    windows_per_episode: int = 4
-    epochs: int = 300
-    lr: float = 1e-3
-    val_fraction: float = 0.2       # of the labelled scenes (by order, i.e. by episode)
-    seed: int = 0
 
 
 def adversary_collides(traj: np.ndarray, sizes: np.ndarray, row: int) -> bool:

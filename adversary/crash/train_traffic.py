@@ -19,13 +19,14 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 import torch
 
 from adversary.crash.batch import Batch, collate
+from adversary.crash.config import TrainTrafficConfig
 from adversary.crash.features import FeatureConfig, SceneTensors, scene_tensors
 from adversary.crash.traffic_model import TrafficModel, TrafficModelConfig, kl_normal
 from rasterize.errors import InputError
@@ -36,21 +37,6 @@ from riskmap.infra.checkpoint import load_weights, read_sidecar, save_checkpoint
 from riskmap.infra.rundir import refuse_unless_resume
 
 CHECKPOINT_KIND = "traffic_cvae"
-
-
-@dataclass(frozen=True)
-class TrainTrafficConfig:
-    epochs: int = 30
-    batch_size: int = 32
-    lr: float = 1e-3
-    kl_weight: float = 0.05         # beta
-    free_bits: float = 2.0          # nats per agent the KL may use without penalty; without it the
-                                    # posterior collapses onto the prior (highway futures are very
-                                    # predictable from the past) and the decoder ignores z, which
-                                    # leaves the attack nothing to optimise
-    val_fraction: float = 0.15      # share of each dataset's episodes held out
-    seed: int = 0
-    max_windows_per_episode: int = 0   # 0: all
 
 
 def load_windows(roots: list[Path], features: FeatureConfig, val_fraction: float,

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from rasterize.errors import InputError
-from riskmap.infra.cli import positive_int
+from riskmap.infra.cli import add_config_options, config_from_args, positive_int
 
 
 def _print_summary(summary: dict, out: str) -> None:
@@ -22,9 +22,7 @@ def _print_summary(summary: dict, out: str) -> None:
 def _run_search(args: argparse.Namespace) -> int:
     from adversary.search.run import SearchConfig, search
 
-    config = SearchConfig(planner=args.planner, template=args.template, algorithm=args.algorithm,
-                          pop=args.pop, gen=args.gen, seed=args.seed, episode_s=args.episode_s,
-                          workers=args.workers)
+    config = config_from_args(SearchConfig, args)
     _print_summary(search(config, Path(args.out), resume=args.resume, progress=not args.quiet,
                           backend=args.backend, address=args.address), args.out)
     return 0
@@ -40,19 +38,18 @@ def _run_report(args: argparse.Namespace) -> int:
 
 
 def add_parsers(subparsers) -> None:
-    from adversary.search.run import ALGORITHMS
+    from adversary.search.run import ALGORITHMS, SearchConfig
     from adversary.search.scenarios import TEMPLATES
 
     p = subparsers.add_parser("search", help="NSGA-II or random search for scenarios where the ego "
                                              "collides")
-    p.add_argument("--planner", required=True, help="planner SPEC: idm, cv, riskmap:PATH")
-    p.add_argument("--template", required=True, choices=sorted(TEMPLATES))
-    p.add_argument("--algorithm", default="nsga2", choices=ALGORITHMS)
-    p.add_argument("--pop", type=positive_int, default=20, help="evaluations per generation")
-    p.add_argument("--gen", type=positive_int, default=10, help="generations")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--episode-s", type=float, default=10.0, help="simulated seconds per evaluation")
-    p.add_argument("--workers", type=positive_int, default=1, help="evaluation processes")
+    add_config_options(
+        p, SearchConfig, "planner", "template", "algorithm", "pop", "gen", "seed", "episode_s", "workers",
+        help={"planner": "planner SPEC: idm, cv, riskmap:PATH", "pop": "evaluations per generation",
+              "gen": "generations", "episode_s": "simulated seconds per evaluation",
+              "workers": "evaluation processes"},
+        option_types={"pop": positive_int, "gen": positive_int, "workers": positive_int},
+        choices={"template": sorted(TEMPLATES), "algorithm": ALGORITHMS})
     p.add_argument("--backend", default="local", choices=("local", "ray"),
                    help="local process pool, or Ray tasks (pip install 'riskmap-toolkit[ray]')")
     p.add_argument("--address", default=None, help="Ray cluster address (default: a local Ray)")

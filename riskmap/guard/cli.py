@@ -5,16 +5,15 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from riskmap.infra.cli import positive_int
+from riskmap.guard.config import GuardTrainConfig
+from riskmap.guard.dataset import GuardCollectConfig
+from riskmap.infra.cli import add_config_options, config_from_args, positive_int
 
 
 def cmd_collect(args: argparse.Namespace) -> int:
-    from riskmap.guard.dataset import GuardCollectConfig, collect
+    from riskmap.guard.dataset import collect
 
-    config = GuardCollectConfig(seen_envs=tuple(args.seen_envs.split(",")),
-                                unseen_envs=tuple(args.unseen_envs.split(",")), train_episodes=args.train_episodes, seen_test_episodes=args.seen_episodes,
-                                unseen_episodes=args.unseen_episodes, planner_every=args.planner_every,
-                                seed=args.seed, episode_s=args.episode_s)
+    config = config_from_args(GuardCollectConfig, args)
     manifest = collect(config, Path(args.out), resume=args.resume, progress=not args.quiet)
     for split, c in manifest["splits"].items():
         print(f"{split}: {c['windows']} windows ({c['positives']} positive) from {c['episodes']} episodes "
@@ -23,10 +22,9 @@ def cmd_collect(args: argparse.Namespace) -> int:
 
 
 def cmd_train(args: argparse.Namespace) -> int:
-    from riskmap.guard.train import GuardTrainConfig, train
+    from riskmap.guard.train import train
 
-    config = GuardTrainConfig(epochs=args.epochs, patience=args.patience, lr=args.lr,
-                              batch_size=args.batch_size, seed=args.seed)
+    config = config_from_args(GuardTrainConfig, args)
     result = train(Path(args.data), Path(args.out), config, resume=args.resume, progress=not args.quiet)
     for split in ("seen", "unseen"):
         m = result["test"][split]
@@ -57,28 +55,28 @@ def add_parsers(sub) -> None:
     guard_sub = p.add_subparsers(dest="guard_command", required=True)
     q = guard_sub.add_parser("collect", help="(ego, neighbour) accident windows from closed-loop episodes")
     q.add_argument("--out", required=True, help="dataset directory to create")
-    q.add_argument("--seen-envs", default="highway-v0,merge-v0",
-                   help="comma-separated scenario families for training and the seen test")
-    q.add_argument("--unseen-envs", default="intersection-v0", help="comma-separated held-out families")
-    q.add_argument("--train-episodes", type=positive_int, default=40,
-                   help="episodes per seen family (train + validation)")
-    q.add_argument("--seen-episodes", type=positive_int, default=12, help="seen-test episodes per family")
-    q.add_argument("--unseen-episodes", type=positive_int, default=16, help="held-out family episodes")
-    q.add_argument("--planner-every", type=positive_int, default=4,
-                   help="every k-th episode is also driven by the risk-map planner")
-    q.add_argument("--episode-s", type=float, default=20.0, help="simulated seconds per episode")
-    q.add_argument("--seed", type=int, default=0)
+    add_config_options(
+        q, GuardCollectConfig, "seen_envs", "unseen_envs", "train_episodes", "seen_test_episodes",
+        "unseen_episodes", "planner_every", "episode_s", "seed",
+        flags={"seen_test_episodes": "--seen-episodes"},
+        help={"seen_envs": "comma-separated scenario families for training and the seen test",
+              "unseen_envs": "comma-separated held-out families",
+              "train_episodes": "episodes per seen family (train + validation)",
+              "seen_test_episodes": "seen-test episodes per family",
+              "unseen_episodes": "held-out family episodes",
+              "planner_every": "every k-th episode is also driven by the risk-map planner",
+              "episode_s": "simulated seconds per episode"},
+        option_types={name: positive_int for name in ("train_episodes", "seen_test_episodes",
+                                                      "unseen_episodes", "planner_every")})
     q.add_argument("--resume", action="store_true")
     q.add_argument("--quiet", action="store_true")
     q.set_defaults(func=cmd_collect)
     q = guard_sub.add_parser("train", help="train the TGAT accident predictor")
     q.add_argument("--data", required=True, help="directory from `riskmap guard collect`")
     q.add_argument("--out", required=True, help="run directory")
-    q.add_argument("--epochs", type=positive_int, default=40)
-    q.add_argument("--patience", type=positive_int, default=8, help="epochs without a better val AP")
-    q.add_argument("--lr", type=float, default=4e-4)
-    q.add_argument("--batch-size", type=positive_int, default=8)
-    q.add_argument("--seed", type=int, default=0)
+    add_config_options(q, GuardTrainConfig, "epochs", "patience", "lr", "batch_size", "seed",
+                       help={"patience": "epochs without a better val AP"},
+                       option_types={name: positive_int for name in ("epochs", "patience", "batch_size")})
     q.add_argument("--resume", action="store_true")
     q.add_argument("--quiet", action="store_true")
     q.set_defaults(func=cmd_train)

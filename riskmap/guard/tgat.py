@@ -19,26 +19,12 @@ logits [B].
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
 
 import torch
 from torch import nn
 
+from riskmap.guard.config import TGATConfig
 from riskmap.guard.features import EDGE_DIM, EVENT_TIMES_S, NODE_DIM, OBSERVED, TARGET_TIME_S
-
-
-@dataclass(frozen=True)
-class TGATConfig:
-    hidden: int = 32
-    time_dim: int = 8          # m: Φ has 2m components
-    heads: int = 2
-    layers: int = 2
-    dropout: float = 0.1
-    ds_scale_m: float = 10.0   # d_s is divided by this (and clipped to ±5) before the network
-    speed_scale_mps: float = 10.0
-
-    def to_dict(self) -> dict:
-        return asdict(self)
 
 
 class TimeEncoding(nn.Module):

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import io
 import json
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -18,25 +18,16 @@ import torch
 from torch import nn
 
 from rasterize.errors import InputError
+from riskmap.guard.config import GuardTrainConfig
 from riskmap.guard.dataset import load_split
 from riskmap.guard.metrics import binary_metrics
-from riskmap.guard.tgat import TGAT, TGATConfig
+from riskmap.guard.tgat import TGAT
 from riskmap.infra.atomic import atomic_write, write_json
 from riskmap.infra.checkpoint import save_checkpoint
 from riskmap.infra.rundir import refuse_unless_resume
 
 CHECKPOINT_KIND = "guard_tgat"
 ALERT_THRESHOLD = 0.6     # the online threshold of the paper; metrics are also given at 0.5
-
-
-@dataclass(frozen=True)
-class GuardTrainConfig:
-    epochs: int = 40
-    patience: int = 8           # stop after this many epochs without a better validation AP
-    lr: float = 4e-4
-    batch_size: int = 8
-    seed: int = 0
-    model: TGATConfig = field(default_factory=TGATConfig)
 
 
 def _tensors(split: dict) -> tuple[torch.Tensor, ...]:

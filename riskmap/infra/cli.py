@@ -55,12 +55,12 @@ def _option_type(hint):
 
 def add_config_options(parser: argparse.ArgumentParser, config_type: type, *names: str,
                        flags: dict[str, str] | None = None, help: dict[str, str] | None = None,
-                       option_types: dict | None = None) -> None:
+                       option_types: dict | None = None, choices: dict | None = None) -> None:
     """Add `--field-name` options for fields `names` of the frozen config dataclass `config_type`:
     type and default come from the dataclass (one source of truth), help from `help` or the field's
     `metadata["help"]`. `flags` renames an option, `option_types` overrides its argparse type (e.g.
-    `positive_int`). Read them back with `config_from_args`."""
-    flags, help, option_types = flags or {}, help or {}, option_types or {}
+    `positive_int`), `choices` limits its values. Read them back with `config_from_args`."""
+    flags, help, option_types, choices = flags or {}, help or {}, option_types or {}, choices or {}
     hints = typing.get_type_hints(config_type)
     by_name = {f.name: f for f in dataclasses.fields(config_type)}
     for name in names:
@@ -75,6 +75,8 @@ def add_config_options(parser: argparse.ArgumentParser, config_type: type, *name
             default, required = None, True
         kwargs = {"dest": name, "type": option_types.get(name, _option_type(hints[name])),
                   "help": help.get(name, field.metadata.get("help"))}
+        if name in choices:
+            kwargs["choices"] = tuple(choices[name])
         if required:
             kwargs["required"] = True
         else:

@@ -1,0 +1,51 @@
+"""Command options made from config dataclasses (riskmap.infra.cli)."""
+
+import argparse
+from dataclasses import dataclass, field
+
+import pytest
+
+from riskmap.infra.cli import add_config_options, config_from_args, positive_int
+
+
+@dataclass(frozen=True)
+class Example:
+    data: str
+    episodes: int = 3
+    rate_hz: float = 10.0
+    envs: tuple[str, ...] = ("highway-v0",)
+    limit: int | None = None
+    note: str = field(default="x", metadata={"help": "from the field"})
+
+
+def _parser(**kw) -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(exit_on_error=False)
+    add_config_options(parser, Example, "data", "episodes", "rate_hz", "envs", "limit", "note", **kw)
+    return parser
+
+
+def test_defaults_and_types_come_from_the_dataclass():
+    config = config_from_args(Example, _parser().parse_args(["--data", "d"]))
+    assert config == Example("d")
+    config = config_from_args(Example, _parser().parse_args(
+        ["--data", "d", "--episodes", "5", "--rate-hz", "2.5", "--envs", "a,b", "--limit", "7"]))
+    assert config == Example("d", 5, 2.5, ("a", "b"), 7)
+
+
+def test_required_renamed_typed_and_help():
+    parser = _parser(flags={"episodes": "--count"}, option_types={"episodes": positive_int},
+                     help={"data": "where"}, choices={"note": ("x", "y")})
+    with pytest.raises((SystemExit, argparse.ArgumentError)):
+        parser.parse_args([])                                # --data is required (no default)
+    assert config_from_args(Example, parser.parse_args(["--data", "d", "--count", "2"])).episodes == 2
+    with pytest.raises((SystemExit, argparse.ArgumentError)):
+        parser.parse_args(["--data", "d", "--count", "0"])   # positive_int
+    with pytest.raises((SystemExit, argparse.ArgumentError)):
+        parser.parse_args(["--data", "d", "--note", "z"])    # choices
+    text = parser.format_help()
+    assert "where" in text and "from the field" in text
+
+
+def test_an_unknown_field_is_a_programming_error():
+    with pytest.raises(ValueError, match="no field 'nope'"):
+        add_config_options(argparse.ArgumentParser(), Example, "nope")
