@@ -247,9 +247,10 @@ class TrafficRecorder:
         return self._latest[agent]
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(states [A, S, 6], valid [A, S], sizes [A, 2], kinds [A]) of the whole record."""
+        """(states [A, S, 6], valid [A, S], sizes [A, 2], kinds [A]) of the whole record: one row per
+        recorded agent (a vehicle that took over an agent's recording, `adopt`, adds none)."""
         if self._cache is None:
-            n_agents, n_steps = len(self._alive), self.num_steps
+            n_agents, n_steps = len(self._sizes), self.num_steps
             states = np.zeros((n_agents, n_steps, STATE_DIM))
             valid = np.zeros((n_agents, n_steps), dtype=bool)
             for step, agent, state in self._rows:

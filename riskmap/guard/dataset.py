@@ -152,9 +152,6 @@ def run_job(job: Job, config: GuardCollectConfig, env, planner) -> tuple[dict, d
                                episode_s=config.episode_s)
     record = drive_episode(env, planner, drive_config, job.episode, hooks=DriveHooks(on_ready=hooks))
     states, valid, sizes, kinds = keep.run.recorder.arrays()
-    # The recorder's state rows also count vehicle objects that continue another agent's record
-    # (the ego handed to a planner, an aggressor); agent ids index the first len(sizes) rows.
-    states, valid = states[:len(sizes)], valid[:len(sizes)]
     rng = np.random.default_rng([job.seed, job.episode, int(job.aggressive), 7])
     windows = extract_windows(states, valid, sizes, kinds, keep.run.recorder.ego_id, bool(record["collided"]),
                               config, rng)
