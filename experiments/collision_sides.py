@@ -15,7 +15,9 @@ from pathlib import Path
 import numpy as np
 
 from rasterize.frames import ego_from_world, heading_angle
-from riskmap.evaluation.evaluate import EvalConfig, _env, _planner
+from riskmap.evaluation.evaluate import EvalConfig
+from riskmap.registry import cached_planner
+from riskmap.sim.episode import cached_env
 from riskmap.sim.log_replay import HumanLog, LogReplayEpisode
 
 
@@ -26,9 +28,9 @@ def collision_side(out: Path, spec: str, episode: int) -> dict:
     config = EvalConfig(meta["env_id"], (spec,), meta["episodes"], meta["seed"], meta["mode"],
                         episode_s=meta["episode_s"])
     log = HumanLog.load(out / "logs" / f"episode_{episode:06d}.npz")
-    env = _env(config.env_id, config.control_hz)
+    env = cached_env(config.env_id, config.control_hz)
     run = LogReplayEpisode(env, config.env_id, config.seed, episode, log, config.control_hz)
-    drive_episode(env, _planner(spec, config.seed), DriveConfig(config.env_id, 1, config.seed,
+    drive_episode(env, cached_planner(spec, config.seed), DriveConfig(config.env_id, 1, config.seed,
                   episode_s=config.episode_s), episode, run=run)
     if not run.crashed:
         return {"episode": episode, "collided": False}
