@@ -25,6 +25,8 @@ from riskmap.infra.atomic import write_json, write_npz
 from riskmap.infra.parallel import run_parallel
 from riskmap.infra.provenance import provenance
 from riskmap.sim.episode import FAMILY_SETUPS, Episode, FamilySetup, make_env
+from riskmap.sim.plan import HumanDriver
+from riskmap.sim.rollout import LoopConfig, drive_world
 
 FORMAT_VERSION = 2
 SHARD_DIR = "shards"
@@ -78,8 +80,7 @@ class CollectConfig:
 def run_episode(env, config: CollectConfig, episode: int):
     """Simulate one episode with the IDM/MOBIL ego; returns (windows as Scenes, episode info)."""
     run = Episode(env, config.env_id, config.seed, episode, config.record_hz)
-    while not run.done and run.time_s < config.setup.episode_s - 1e-9:
-        run.step()
+    drive_world(run, HumanDriver(), LoopConfig(round(config.setup.episode_s * config.record_hz), replan_every=1))
     recorder = run.recorder
     stride = int(round(config.window_stride_s * config.record_hz))
     first = int(round(config.history_s * config.record_hz))

@@ -21,7 +21,8 @@ from rasterize.scene import Scene
 from riskmap.infra.atomic import write_npz
 from riskmap.sim.episode import Episode
 from riskmap.sim.metrics import centre_off_lane
-from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, Plan
+from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, HumanDriver, Plan
+from riskmap.sim.rollout import LoopConfig, drive_world
 
 
 @dataclass(frozen=True)
@@ -80,10 +81,7 @@ def record_human_episode(env, env_id: str, seed: int, episode: int, rate_hz: int
                          episode_s: float) -> HumanLog:
     """Drive the IDM/MOBIL human on (seed, episode) for `episode_s` (or until it crashes / leaves)."""
     run = Episode(env, env_id, seed, episode, rate_hz)
-    for _ in range(round(episode_s * rate_hz)):
-        run.step()
-        if run.done:
-            break
+    drive_world(run, HumanDriver(), LoopConfig(round(episode_s * rate_hz), replan_every=1))
     return log_of(run)
 
 
