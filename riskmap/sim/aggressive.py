@@ -7,14 +7,18 @@ guard's scripted-aggressive scenes (riskmap.guard.aggressors), with the same par
    `selection` rule: STRIVE's distance rule (below) or simply the nearest vehicle.
 2. `make_aggressive` replaces that vehicle's driver by `AggressiveVehicle` (same state, route and
    lane), an IDM/MOBIL driver with these changes, applied every simulation step:
-   - desired speed = max(its own, the ego's speed + `speed_boost_mps`), so it catches up;
+   - desired speed = max(its own, the ego's speed + `speed_boost_mps`), so it catches up; or,
+     with `pace_ahead_m` set, the ego's speed adjusted to sit that far ahead of the ego until it
+     cuts in (it lines up beside the ego instead of overtaking it);
    - IDM time gap `time_gap_s` and jam distance `jam_distance_m` (highway-env's defaults are
      1.5 s and 10 m), MOBIL politeness 0 and no minimum gain: it tailgates and pushes in;
    - cut-in: when it drives on a lane beside the ego's lane (same road segment) and its centre
      is between `cut_in_behind_m` behind and `cut_in_ahead_m` ahead of the ego's centre, it
      changes into the ego's lane at once, whatever the gap;
    - brake check: when it is ahead of the ego in the ego's lane (or changing into it) with a
-     bumper-to-bumper gap under `brake_gap_m`, it brakes at `brake_mps2`.
+     bumper-to-bumper gap under `brake_gap_m`, it brakes at `brake_mps2` (harder than IDM's
+     6 m/s² limit if asked); with `brake_hold_s` > 0 it brakes once, for that long, whatever the
+     gap does meanwhile (a sustained brake check rather than braking only while close).
    It never reverses and keeps highway-env's steering and acceleration limits.
 It needs no training; with the same seed it makes the same adversary do the same thing.
 
@@ -51,6 +55,8 @@ class AggressiveParams:
     cut_in_ahead_m: float = 20.0
     brake_gap_m: float = 12.0
     brake_mps2: float = 6.0
+    brake_hold_s: float = 0.0          # > 0: one brake check that lasts this long (s)
+    pace_ahead_m: float | None = None  # set: sit this far ahead of the ego until the cut-in
 
     def __post_init__(self) -> None:
         if self.selection not in ("softmin", "nearest"):
@@ -59,7 +65,7 @@ class AggressiveParams:
             if not getattr(self, name) > 0:
                 raise InputError(f"aggressive_neighbour {name} must be positive, got {getattr(self, name)}")
         for name in ("speed_boost_mps", "time_gap_s", "jam_distance_m", "cut_in_behind_m",
-                     "cut_in_ahead_m", "brake_gap_m"):
+                     "cut_in_ahead_m", "brake_gap_m", "brake_hold_s"):
             if getattr(self, name) < 0:
                 raise InputError(f"aggressive_neighbour {name} must be >= 0, got {getattr(self, name)}")
 
@@ -148,15 +154,20 @@ def aggressive_vehicle_class():
             if self.crashed:
                 return
             p, ego = self.params, self.target
-            self.target_speed = max(self.base_target_speed, float(ego.speed) + p.speed_boost_mps)
-            self.follow_road()
             forward, _ = self._ego_offset()
+            if p.pace_ahead_m is None:
+                self.target_speed = max(self.base_target_speed, float(ego.speed) + p.speed_boost_mps)
+            elif not self.cut_in_started:
+                # forward < 0: the ego is behind us by -forward; close the error to pace_ahead_m.
+                error_m = p.pace_ahead_m + forward
+                self.target_speed = max(float(ego.speed) + float(np.clip(0.5 * error_m, -5.0, 5.0)), 0.0)
+            self.follow_road()
             ego_lane = ego.lane_index
             beside = (ego_lane is not None and self.lane_index is not None
                       and ego_lane[:2] == self.lane_index[:2] and ego_lane != self.lane_index)
             if beside and -p.cut_in_ahead_m <= forward <= p.cut_in_behind_m:
                 # We are at most cut_in_ahead_m ahead of / cut_in_behind_m behind the ego: push in.
-                self.target_lane_index = ego_lane
+                self.target_lane_index, self.cut_in_started = ego_lane, True
             elif self.enable_lane_change:
                 self.change_lane_policy()
             steering = float(np.clip(self.steering_control(self.target_lane_index),
@@ -169,23 +180,31 @@ def aggressive_vehicle_class():
                                                      rear_vehicle=rear))
             in_ego_lane = ego_lane in (self.lane_index, self.target_lane_index)
             gap = -forward - 0.5 * (self.LENGTH + ego.LENGTH)    # ego behind us: forward < 0
-            if in_ego_lane and forward < 0 and gap < p.brake_gap_m:
+            close = in_ego_lane and forward < 0 and gap < p.brake_gap_m
+            if p.brake_hold_s > 0:
+                if close and not self.brake_checked:
+                    self.brake_checked, self.brake_left_s = True, p.brake_hold_s
+                if self.brake_left_s > 0:
+                    accel, self.brake_left_s = -p.brake_mps2, self.brake_left_s - self.dt_s
+            elif close:
                 accel = -p.brake_mps2
-            accel = float(np.clip(accel, -self.ACC_MAX, self.ACC_MAX))
+            accel = float(np.clip(accel, -max(self.ACC_MAX, p.brake_mps2), self.ACC_MAX))
             accel = max(accel, -self.speed / 0.1)    # stop, never reverse (0.1 s steps)
             Vehicle.act(self, {"steering": steering, "acceleration": accel})
 
     return AggressiveVehicle
 
 
-def make_aggressive(vehicle, target_of, params: AggressiveParams):
-    """An AggressiveVehicle at `vehicle`'s state, aimed at the vehicle `target_of()` returns."""
+def make_aggressive(vehicle, target_of, params: AggressiveParams, dt_s: float = 0.1):
+    """An AggressiveVehicle at `vehicle`'s state, aimed at the vehicle `target_of()` returns;
+    `dt_s`: the simulation step (s), for timed brake checks."""
     cls = aggressive_vehicle_class()
     new = cls(vehicle.road, vehicle.position.copy(), heading=vehicle.heading, speed=vehicle.speed,
               target_lane_index=vehicle.target_lane_index, target_speed=vehicle.target_speed,
               route=list(vehicle.route) if vehicle.route else None,
               timer=getattr(vehicle, "timer", None))
-    new.params, new.target_of = params, target_of
+    new.params, new.target_of, new.dt_s = params, target_of, dt_s
+    new.brake_checked, new.brake_left_s, new.cut_in_started = False, 0.0, False
     new.base_target_speed = float(vehicle.target_speed)
     new.TIME_WANTED = params.time_gap_s           # instance attributes shadow IDM's defaults
     new.DISTANCE_WANTED = params.jam_distance_m + new.LENGTH
@@ -209,7 +228,7 @@ def install_aggressive_neighbour(run, params: AggressiveParams):
                               sim_dt_s=run.dt, radius_m=params.radius_m)
     if chosen is None:
         return None
-    new = make_aggressive(chosen, lambda: run.ego, params)
+    new = make_aggressive(chosen, lambda: run.ego, params, run.dt)
     road.vehicles[road.vehicles.index(chosen)] = new
     run.recorder.adopt(new, chosen)
     return new

@@ -4,7 +4,7 @@ import pytest
 
 pytest.importorskip("agentspeak")
 
-from riskmap.guard.aggressors import AggressorHook
+from riskmap.guard.aggressors import GUARD_AGGRESSION, AggressorHook
 from riskmap.guard.guarded import GuardConfig, GuardedHumanDriver, GuardedPlanner
 from riskmap.guard.system2 import DecelerationAgent, System2Config
 from riskmap.planner.baselines import ConstantVelocityPlanner
@@ -51,4 +51,4 @@ def test_aggressor_hook_installs_a_scripted_neighbour(env):
     # the toolkit's one aggressive driver (riskmap.sim.aggressive), aimed at the ego
     assert type(hook.aggressor).__name__ == "AggressiveVehicle"
     assert hook.aggressor.TIME_WANTED == hook.params.time_gap_s
-    assert hook.aggressor.target_speed >= hook.aggressor.base_target_speed
+    assert hook.aggressor.params == GUARD_AGGRESSION and hook.aggressor.params.pace_ahead_m == 5.0
