@@ -23,7 +23,8 @@ def load(run: Path) -> dict:
         "off_road": int(sum(r["off_road"] for r in records)),
         "distance_m": float(np.mean([r["distance_m"] for r in records])),
         "mean_speed_mps": float(np.mean([r["mean_speed_mps"] for r in records])),
-        "min_gap_m": float(np.mean([min(r["min_gap_m"], 100.0) for r in records])),
+        "min_gap_m": float(np.mean([100.0 if r["min_gap_m"] is None else min(r["min_gap_m"], 100.0)
+                                         for r in records])),
         "plan_ms_median": (float(np.median([r["plan_ms_median"] for r in records]))
                            if records[0]["plan_ms_median"] is not None else None),
     }

@@ -101,7 +101,7 @@ def drive_record(record, attack: dict, variant: str, seed: int) -> dict:
            "collision_time_s": metrics["collision_time_s"], "collision_any": bool(metrics["collision_any"]),
            "collision_before_t0": bool(metrics["collision_before_t0"]),
            "progress_m": float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum()),
-           "progress_to_collision_m": metrics["ego_progress_m"], "min_gap_m": metrics["min_gap_m"],
+           "progress_to_collision_m": metrics["distance_m"], "min_gap_m": metrics["min_gap_m"],
            "rollout_s": result.wall_s}
     if guard is not None:
         summary = guard.summary()

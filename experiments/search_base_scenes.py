@@ -22,7 +22,7 @@ def main(planners: list[str]) -> None:
         for name, template in TEMPLATES.items():
             r = evaluate(template, template.neutral, EvaluationConfig(planner, name))
             print(f"| {planner} | {name} | {r['collided']} | {r['off_road']} | {r['journey_m']:.0f} | "
-                  f"{r['min_gap_m']:.1f} |", flush=True)
+                  f"{'-' if r['min_gap_m'] is None else format(r['min_gap_m'], '.1f')} |", flush=True)
 
 
 if __name__ == "__main__":

@@ -19,7 +19,7 @@ Differences to the episode attacks, all visible in the record:
   ego passing through other boxes; `collided` is any such collision (or one before t0),
   `collided_with_adversary` the CRASH/STRIVE collision; kinematic value, collision type and the
   solution check exist only for collisions with the adversary;
-- progress_m and min_gap_m span t0 to the collision (the end without one); Safety % is not
+- distance_m and min_gap_m span t0 to the collision (the end without one); Safety % is not
   measured (None).
 A scene that cannot be attacked (the human crashed or left the road before t0 + 6 s, no vehicle
 within 60 m of the ego, or no candidate for the selector) gives an "ok" record with
@@ -37,12 +37,13 @@ from pathlib import Path
 import numpy as np
 
 from adversary.attacks.base import AttackEntry
-from adversary.attacks.episode import attack_seed
+from adversary.attacks.episode import attack_seed, job_fields
 from rasterize.config import family_of_env
 from rasterize.errors import InputError
 from riskmap.infra.config_mapping import require
 from riskmap.registry import cached_planner
 from riskmap.sim.metrics import coarse_collision_name
+from riskmap.sim.record import EpisodeRecord, current_names
 
 # CRASH's SELECTORS (adversary.crash.selection), spelt out so that reading a config does not
 # import torch; tests/adversary/test_crash_attack.py checks the two agree.
@@ -122,26 +123,35 @@ def _models(traffic: Path, selector: Path | None):
     return _MODELS[key]
 
 
-def _not_attacked(reason: str, extra: dict) -> dict:
+def _crash_fields(collided: bool, off_road: bool, distance_m: float | None, min_gap_m: float | None,
+                  simulated_s: float | None, extra: dict) -> dict:
+    """Job record fields in the `EpisodeRecord` layout. The judge measures no speed and no plan
+    times (None), and its episode is no campaign-seeded one (env_seed None)."""
+    return job_fields(EpisodeRecord(
+        planner="", collided=collided, off_road=off_road, simulated_s=simulated_s,   # planner: dropped
+        distance_m=distance_m, mean_speed_mps=None, min_gap_m=min_gap_m, plan_calls=None,
+        plan_ms_median=None, plan_ms_mean=None, plan_ms_p90=None, extra={**extra, "env_seed": None}))
+
+
+def _not_attacked(reason: str, extra: dict, timing: dict | None = None) -> dict:
     """The record of a job whose scene could not be attacked (module docstring)."""
-    return {"attacked": False, "not_attacked": reason, "collided": False, "ego_off_road": False,
-            "has_adversary": False, "collided_with_adversary": False, "collision_type": None,
-            "collision_time_s": None, "kinematic_mps": None, "adversary_off_road": None,
-            "other_off_road": False, "encounters": None, "dangerous_encounters": None,
-            "safety_pct": None, "solution_found": None, "progress_m": None, "mean_speed_mps": None,
-            "min_gap_m": None, "simulated_s": None, "env_seed": None, "plan_calls": None,
-            "attack_extra": extra, "timing": {"plan_ms_median": None}}
+    return _crash_fields(False, False, None, None, None, {
+        "attacked": False, "not_attacked": reason,
+        "has_adversary": False, "collided_with_adversary": False, "collision_type": None,
+        "collision_time_s": None, "kinematic_mps": None, "adversary_off_road": None,
+        "other_off_road": False, "encounters": None, "dangerous_encounters": None,
+        "safety_pct": None, "solution_found": None,
+        "attack_extra": extra, "timing": timing or {}})
 
 
 def crash_record(result: dict, scene_s: float) -> dict:
     """Campaign record fields (adversary.campaign.job._record's) from one `attack_records` result."""
     extra = {"selector": result["selector"], "p": result["p"], "candidates": result["candidates"],
              "agents": result["agents"]}
-    timing = {"plan_ms_median": None, "attack_seconds": round(result["seconds"], 3)}
+    timing = {"attack_seconds": round(result["seconds"], 3)}
     if result["status"] != "ok":
-        return {**_not_attacked(f"no candidate adversary for selector {result['selector']}", extra),
-                "timing": timing}
-    m = result["metrics"]
+        return _not_attacked(f"no candidate adversary for selector {result['selector']}", extra, timing)
+    m = current_names(result["metrics"])
     extra.update({"adversary_row": result["adversary_row"], "adversary_log_id": result["adversary_log_id"],
                   "iterations": result["generation"]["iterations"],
                   "replans": result["generation"]["replans"],
@@ -150,21 +160,19 @@ def crash_record(result: dict, scene_s: float) -> dict:
                   "collision_before_t0": m["collision_before_t0"],
                   "crash_collision_type": m["collision_type"]})
     adversary_hit = bool(m["collision"])
-    return {"attacked": True, "not_attacked": None,
-            "collided": adversary_hit or bool(m["collision_any"]) or bool(m["collision_before_t0"]),
-            "ego_off_road": bool(m["ego_off_road"]), "has_adversary": True,
-            "collided_with_adversary": adversary_hit,
-            # In the campaign monitor's vocabulary, so that reports count both sources alike.
-            "collision_type": coarse_collision_name(m["collision_type"]),
-            "collision_time_s": m["collision_time_s"] if adversary_hit else m["collision_any_time_s"],
-            "kinematic_mps": m["kinematic_value_mps"],
-            "adversary_off_road": bool(m["adversary_off_road"]),
-            "other_off_road": bool(m["other_off_road"]),
-            "encounters": None, "dangerous_encounters": None, "safety_pct": None,
-            "solution_found": m["solution_found"], "progress_m": m["ego_progress_m"],
-            "mean_speed_mps": None, "min_gap_m": m["min_gap_m"], "simulated_s": scene_s,
-            "env_seed": None, "plan_calls": None, "attack_extra": extra,
-            "timing": {**timing, "generation_seconds": result["generation"]["batch_seconds"]}}
+    collided = adversary_hit or bool(m["collision_any"]) or bool(m["collision_before_t0"])
+    return _crash_fields(collided, bool(m["off_road"]), m["distance_m"], m["min_gap_m"], scene_s, {
+        "attacked": True, "not_attacked": None, "has_adversary": True,
+        "collided_with_adversary": adversary_hit,
+        # In the campaign monitor's vocabulary, so that reports count both sources alike.
+        "collision_type": coarse_collision_name(m["collision_type"]),
+        "collision_time_s": m["collision_time_s"] if adversary_hit else m["collision_any_time_s"],
+        "kinematic_mps": m["kinematic_value_mps"],
+        "adversary_off_road": bool(m["adversary_off_road"]),
+        "other_off_road": bool(m["other_off_road"]),
+        "encounters": None, "dangerous_encounters": None, "safety_pct": None,
+        "solution_found": m["solution_found"], "attack_extra": extra,
+        "timing": {**timing, "generation_seconds": result["generation"]["batch_seconds"]}})
 
 
 def _panel_artifact(panel: Path) -> bytes | None:

@@ -9,12 +9,14 @@ rule); `record_of` turns a driven episode and its `EpisodeMonitor` into the job 
 from __future__ import annotations
 
 import io
+from dataclasses import replace
 
 import numpy as np
 
 from adversary.attacks.monitor import EpisodeMonitor
 from riskmap.registry import cached_planner
 from riskmap.sim.plan import HumanDriver
+from riskmap.sim.record import EpisodeRecord
 
 
 def attack_seed(job) -> int:
@@ -73,8 +75,23 @@ def artifact_of(monitor: EpisodeMonitor, recording: RecordingPlanner | None, env
     return buffer.getvalue()
 
 
+PLAN_TIMES = ("plan_ms_median", "plan_ms_mean", "plan_ms_p90")
+
+
+def job_fields(record: EpisodeRecord) -> dict:
+    """A job's record fields from its `EpisodeRecord`. The planner is left out: the job record
+    names it by its SPEC (adversary.campaign.job.Job.describe), not by class. The plan times go
+    under "timing" with the job's other machine-dependent numbers, so that the rest of a record
+    is the same on every run of the job."""
+    fields = record.as_dict()
+    del fields["planner"]
+    plan_times = {name: fields.pop(name) for name in PLAN_TIMES}
+    fields["timing"] = {**plan_times, **fields.get("timing", {})}
+    return fields
+
+
 def record_of(episode: dict, monitor: EpisodeMonitor, extra: dict) -> dict:
-    """The job's measurements from one driven episode and its monitor."""
+    """The job's measurements from one driven episode (`drive_episode`'s record) and its monitor."""
     from adversary.crash.solution import ego_only_solution
 
     solution = None
@@ -82,21 +99,14 @@ def record_of(episode: dict, monitor: EpisodeMonitor, extra: dict) -> dict:
         states, valid, sizes, _ = monitor.run.recorder.arrays()
         solution = ego_only_solution(states, valid, sizes, monitor.run.recorder.ego_id,
                                      monitor.collision_step, monitor.run.dt)
-    return {
-        "collided": bool(episode["collided"]),
-        "ego_off_road": bool(episode["off_road"]),
+    driven = EpisodeRecord.from_dict(episode)
+    return job_fields(replace(driven, extra={
         **monitor.summary(),
         "solution_found": solution,
-        "progress_m": episode["distance_m"],
-        "mean_speed_mps": episode["mean_speed_mps"],
-        "min_gap_m": episode["min_gap_m"] if np.isfinite(episode["min_gap_m"]) else None,
-        "simulated_s": episode["simulated_s"],
         "env_seed": episode["env_seed"],
-        "plan_calls": episode["plan_calls"],
         # Optional, attack-specific numbers (e.g. a search's generations and Pareto front).
         "attack_extra": extra,
-        "timing": {"plan_ms_median": episode["plan_ms_median"]},
-    }
+    }))
 
 
 def drive_with_hooks(job, factory) -> tuple[dict, bytes]:

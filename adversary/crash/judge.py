@@ -310,9 +310,9 @@ def judge(record: SceneRecord, tracks: np.ndarray, rows, adversary_row: int, pla
       rollout: could the ego alone, from 3 s before, have avoided every box): along its own path
       with constant accelerations (solution_found_longitudinal), or moving one lane width left or
       right within 2 s while staying on the road; None without a collision.
-    ego_off_road: the episode's own check (the ego off every lane, once a second) at any time of
+    off_road: the ego, by the episode's own check (the ego off every lane, once a second) at any time of
       the rollout, after a collision too.
-    ego_progress_m: distance the ego drove from t0 to the collision (to the end without one);
+    distance_m: distance the ego drove from t0 to the collision (to the end without one);
     min_gap_m: smallest box gap between the ego and any vehicle within 40 m over the same span.
     """
     tracks, rows = _check_tracks(record, tracks, rows)
@@ -363,7 +363,7 @@ def judge(record: SceneRecord, tracks: np.ndarray, rows, adversary_row: int, pla
         "other_off_road": other_frac > OFF_ROAD_FRACTION, "other_off_road_max": other_frac,
         "kinematic_value_mps": None, "collision_type": None, "solution_found": None,
         "solution_found_longitudinal": None,
-        "ego_off_road": bool(result.drive["off_road"]),
+        "off_road": bool(result.drive["off_road"]),
     }
     metrics["ego_min_accel_mps2"], metrics["ego_max_abs_accel_mps2"] = _ego_accelerations(result, end)
     if k_coll is not None:
@@ -387,7 +387,7 @@ def judge(record: SceneRecord, tracks: np.ndarray, rows, adversary_row: int, pla
             s, result.valid, result.sizes, ego, k_coll, dt, accels_mps2=SOLUTION_LATERAL_ACCELS_MPS2,
             lateral_offsets_m=(lane_m, -lane_m), on_road=on_road))
     path = result.states[ego, k0:end + 1, :2][result.valid[ego, k0:end + 1]]
-    metrics["ego_progress_m"] = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
+    metrics["distance_m"] = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
     gap = _min_gap(result, k0, end)
     metrics["min_gap_m"] = gap if np.isfinite(gap) else None       # None: nobody within 40 m
     metrics["rollout_s"] = result.wall_s

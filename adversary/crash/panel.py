@@ -16,11 +16,13 @@ from adversary.crash.judge import Rollout, splice_tracks
 from adversary.crash.scenes import SceneRecord
 from rasterize.frames import box_corners
 from riskmap.infra.atomic import atomic_write
+from riskmap.sim.record import current_names
 
 _GREY, _BLUE, _RED, _GREEN = "0.55", "tab:blue", "tab:red", "tab:green"
 
 
 def _title_line(metrics: dict) -> str:
+    metrics = current_names(metrics)      # metrics of results stored under the judge's old names
     if metrics["collision"]:
         what = (f"collision {metrics['collision_type']} at {metrics['collision_time_s']:.1f} s, "
                 f"IoU {metrics['collision_iou']:.2f}, |dv| {metrics['kinematic_value_mps']:.1f} m/s, "
@@ -29,7 +31,7 @@ def _title_line(metrics: dict) -> str:
         gap = metrics["min_gap_m"]
         what = "no collision" + (f", min gap {gap:.1f} m" if gap is not None else "")
     off = [name for name, key in (("adversary", "adversary_off_road"), ("other", "other_off_road"),
-                                  ("ego", "ego_off_road")) if metrics[key]]
+                                  ("ego", "off_road")) if metrics[key]]
     return (f"{metrics['planner']}: {what}; ego min accel {metrics['ego_min_accel_mps2']:.1f} m/s²"
             + (f"; off road: {', '.join(off)}" if off else ""))
 

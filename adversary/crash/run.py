@@ -26,6 +26,7 @@ from riskmap.infra.atomic import atomic_write, write_json
 from riskmap.infra.parallel import run_parallel
 from riskmap.infra.provenance import provenance
 from riskmap.infra.rundir import claim_out_dir
+from riskmap.sim.record import current_names
 
 INDEX = "index.json"
 
@@ -117,7 +118,8 @@ def summarise(records: list[dict]) -> dict:
     n = len(records)
 
     def rate(items, key):
-        return sum(bool(r["metrics"][key]) for r in items) / len(items) if items else None
+        # results written before the judge's names were fixed say ego_off_road (current_names)
+        return sum(bool(current_names(r["metrics"])[key]) for r in items) / len(items) if items else None
 
     kin = [r["metrics"]["kinematic_value_mps"] for r in hits if r["metrics"]["kinematic_value_mps"] is not None]
     solved = [r["metrics"]["solution_found"] for r in hits if r["metrics"]["solution_found"] is not None]
@@ -133,7 +135,7 @@ def summarise(records: list[dict]) -> dict:
         "collision_rate": len(hits) / n if n else None,       # over every scene: a scene without a
         "adversary_off_road_rate": rate(ok, "adversary_off_road"),   # candidate counts as a miss
         "other_off_road_rate": rate(ok, "other_off_road"),
-        "ego_off_road_rate": rate(ok, "ego_off_road"),
+        "ego_off_road_rate": rate(ok, "off_road"),
         "kinematic_value_mps": float(np.mean(kin)) if kin else None,
         "solution_rate": float(np.mean(solved)) if solved else None,
         "collision_types": types,

@@ -39,7 +39,7 @@ def metrics_figure(rows: list[dict], path: Path) -> str:
     attacks = sorted({r["attack"] for r in rows})
     planners = sorted({r["planner"] for r in rows})
     panels = [("collision_rate", "collision rate (%)", 100.0), ("safety_pct", "Safety % (mean)", 1.0),
-              ("progress_m", "progress (m, mean)", 1.0), ("kinematic_mps", "kinematic value (m/s)", 1.0)]
+              ("distance_m", "distance (m, mean)", 1.0), ("kinematic_mps", "kinematic value (m/s)", 1.0)]
     fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.8), dpi=100)
     width = 0.8 / max(1, len(planners))
     colours = plt.get_cmap("tab10")

@@ -11,7 +11,7 @@ Rates carry Wilson intervals, means percentile-bootstrap intervals (adversary.re
     solution rate            collisions the ego alone could have avoided / collisions
     Safety %                 mean (and 90th percentile) over jobs of the per-episode Safety %
                              (jobs that do not measure it, e.g. the crash attack's, are left out)
-    progress (m)             mean distance driven
+    distance (m)             mean distance driven
 
 The CRASH ablation (attacks of category "selection") has one row per (attack label, planner), as
 CRASH's Table III: its collision rate is collisions with the adversary over every finished job,
@@ -29,6 +29,7 @@ import numpy as np
 from adversary.report.stats import bootstrap_mean, wilson
 from rasterize.config import family_of_env
 from riskmap.sim.metrics import CAMPAIGN_COLLISION_TYPES
+from riskmap.sim.record import current_names
 
 COLLISION_TYPES = CAMPAIGN_COLLISION_TYPES      # the labels a campaign record's collision_type can hold
 
@@ -47,7 +48,7 @@ def _group_metrics(records: list[dict]) -> dict:
         "kinematic_mps": bootstrap_mean([r["kinematic_mps"] for r in collided]),
         "solution_rate": wilson(sum(bool(r["solution_found"]) for r in solved), len(solved)),
         "safety_pct": bootstrap_mean([r["safety_pct"] for r in ok]),
-        "progress_m": bootstrap_mean([r["progress_m"] for r in ok]),
+        "distance_m": bootstrap_mean([r["distance_m"] for r in ok]),
     }
 
 
@@ -115,7 +116,7 @@ def _guard_pairs(rows: list[dict]) -> list[dict]:
     """Rows of `guard:SPEC` (or `guarded:SPEC`) next to the same attack on SPEC, when both ran."""
     by_key = {(r["planner"], r["attack"]): r for r in rows}
     pairs = []
-    metrics = ("collision_rate", "safety_pct", "progress_m")
+    metrics = ("collision_rate", "safety_pct", "distance_m")
     for (planner, attack), guarded in sorted(by_key.items()):
         prefix, _, inner = planner.partition(":")
         if prefix in ("guard", "guarded") and (inner, attack) in by_key:
@@ -150,7 +151,9 @@ def worst_scenes(records: list[dict], count: int) -> list[dict]:
 
 
 def report_numbers(records: list[dict], gallery: int) -> tuple[dict, dict]:
-    """(results, timing): everything the page shows; timing is machine-dependent."""
+    """(results, timing): everything the page shows; timing is machine-dependent. Records of
+    older campaigns are read under today's names (riskmap.sim.record.current_names)."""
+    records = [current_names(r) for r in records]
     for r in records:
         r.setdefault("family", family_of_env(r["env_id"]))
     comparison, timing_rows = _rows(records, ("planner", "attack"))
@@ -170,7 +173,7 @@ def report_numbers(records: list[dict], gallery: int) -> tuple[dict, dict]:
         "guard": _guard_pairs(comparison) or None,
         "worst": [{k: r[k] for k in ("job_id", "planner", "env_id", "scene_seed", "episode", "attack",
                                      "collided", "collided_with_adversary", "collision_type",
-                                     "kinematic_mps", "safety_pct", "progress_m")}
+                                     "kinematic_mps", "safety_pct", "distance_m")}
                   for r in worst_scenes(records, gallery)],
         "failures": [{"job_id": r["job_id"], "error": r["error"]}
                      for r in records if r["status"] != "ok"],

@@ -19,9 +19,10 @@ def _cmd_drive(args: argparse.Namespace) -> int:
     config = DriveConfig(env_id=args.env, episodes=args.episodes, seed=args.seed)
     summary = drive(config, spec, Path(args.out), resume=args.resume, frames=args.frames,
                     progress=not args.quiet, goal_variance=args.goal_variance)["summary"]
+    gap = "nobody near" if summary["min_gap_m"] is None else f"{summary['min_gap_m']:.1f} m"
     print(f"{spec} on {args.env}: {summary['episodes']} episodes, collision rate "
           f"{summary['collision_rate']:.2f}, distance {summary['distance_m']:.0f} m, "
-          f"min gap {summary['min_gap_m']:.1f} m -> {Path(args.out) / 'summary.json'}")
+          f"min gap {gap} -> {Path(args.out) / 'summary.json'}")
     return 0
 
 

@@ -19,11 +19,13 @@ from riskmap.infra.provenance import provenance
 from riskmap.infra.rundir import claim_out_dir
 from riskmap.registry import make_planner
 from riskmap.sim.episode import make_env
+from riskmap.sim.record import current_names
 from riskmap.sim.rollout import DriveConfig, DriveHooks, drive_episode
 
 
 def summarise(records: list[dict]) -> dict:
     def mean(key):
+        # None (a min gap with nobody near, or a measure the episode lacks) is left out of the mean.
         values = [r[key] for r in records if r[key] is not None and np.isfinite(r[key])]
         return float(np.mean(values)) if values else None
 
@@ -58,7 +60,7 @@ def drive(config: DriveConfig, planner_spec: str, out: Path, resume: bool = Fals
     for episode in tqdm(range(config.episodes), disable=not progress, desc=f"drive {planner_spec}"):
         path = episodes_dir / f"episode_{episode:06d}.json"
         if resume and path.exists():
-            records.append(json.loads(path.read_text()))
+            records.append(current_names(json.loads(path.read_text())))
             continue
         hooks = DriveHooks(on_plan=plan_frame_writer(
             out / "frames", planner, f"episode_{episode:06d}", f"{config.env_id} episode {episode}")

@@ -20,9 +20,7 @@ from __future__ import annotations
 import csv
 import json
 import re
-from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field
-from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
@@ -30,8 +28,10 @@ import numpy as np
 from rasterize.config import family_of_env
 from rasterize.errors import InputError
 from riskmap.infra.atomic import atomic_write, write_json
+from riskmap.infra.parallel import run_parallel
 from riskmap.infra.provenance import provenance
-from riskmap.sim.episode import FAMILY_SETUPS
+from riskmap.registry import cached_planner
+from riskmap.sim.episode import FAMILY_SETUPS, cached_env
 from riskmap.sim.metrics import (
     SafetyConfig,
     ade_m,
@@ -42,13 +42,14 @@ from riskmap.sim.metrics import (
     safety_pct,
     summarise_metric,
 )
+from riskmap.sim.record import EpisodeRecord, current_names
 
 MODES = ("log", "reactive")
 # Per-episode values summarised as mean and 90th percentile over episodes.
-METRICS = ("safety_pct", "ade_m", "goal_error_m", "progress_m", "jerk_mps3", "plan_ms_mean")
+METRICS = ("safety_pct", "ade_m", "goal_error_m", "distance_m", "jerk_mps3", "plan_ms_mean")
 RATES = ("collided", "off_road")
 CSV_FIELDS = ("planner", "label", "episode", "mode", "collided", "off_road", "safety_pct", "dangerous",
-              "encounters", "ade_m", "goal_error_m", "progress_m", "jerk_mps3", "simulated_s",
+              "encounters", "ade_m", "goal_error_m", "distance_m", "jerk_mps3", "simulated_s",
               "plan_ms_mean", "plan_ms_p90", "plan_calls")
 
 
@@ -105,43 +106,31 @@ def _result_path(out: Path, spec: str, episode: int) -> Path:
 def trajectory_metrics(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, ego_id: int,
                        dt_s: float, human_xy: np.ndarray, safety: SafetyConfig) -> dict:
     """Metrics of one driven episode from its record (states [A, S, 6], valid [A, S], sizes [A, 2])."""
-    # A recorder lists an agent once more for each vehicle that took over its recording (they
-    # never hold states); only the first len(sizes) agents are real.
-    states, valid = states[: len(sizes)], valid[: len(sizes)]
     ego = states[ego_id][valid[ego_id]]
     others = np.delete(np.arange(states.shape[0]), ego_id)
     dangerous, encounters = dangerous_encounters(ego, sizes[ego_id], states[others], valid[others],
                                                  sizes[others], safety)
     return {"ade_m": ade_m(ego[:, :2], human_xy), "goal_error_m": goal_error_m(ego[:, :2], human_xy),
-            "progress_m": path_length_m(ego[:, :2]), "jerk_mps3": mean_jerk_mps3(ego[:, :2], dt_s),
+            "distance_m": path_length_m(ego[:, :2]), "jerk_mps3": mean_jerk_mps3(ego[:, :2], dt_s),
             "dangerous": dangerous, "encounters": encounters,
             "safety_pct": safety_pct(dangerous, encounters),
             "simulated_s": round((len(ego) - 1) * dt_s, 3)}
 
 
-# One env and one instance of each planner per process, built on first use.
-_CACHE: dict = {}
-
-
-def _env(env_id: str, rate_hz: int):
-    key = ("env", env_id, rate_hz)
-    if key not in _CACHE:
-        from riskmap.sim.episode import make_env
-
-        _CACHE[key] = make_env(env_id, rate_hz)
-    return _CACHE[key]
-
-
 def _planner(spec: str, seed: int):
-    key = ("planner", spec, seed)
-    if key not in _CACHE:
-        import torch
+    """This process's planner for `spec` (one torch thread: workers run side by side)."""
+    import torch
 
-        from riskmap.registry import make_planner
+    torch.set_num_threads(1)
+    return cached_planner(spec, seed)
 
-        torch.set_num_threads(1)
-        _CACHE[key] = make_planner(spec, seed=seed)
-    return _CACHE[key]
+
+def _record_task(args: tuple) -> None:
+    record_task(*args)
+
+
+def _planner_task(args: tuple) -> tuple[str, int, dict]:
+    return _run_planner_task(*args)
 
 
 def record_task(config: EvalConfig, out: Path, episode: int) -> None:
@@ -151,9 +140,26 @@ def record_task(config: EvalConfig, out: Path, episode: int) -> None:
     path = _log_path(out, episode)
     if path.exists():
         return
-    log = record_human_episode(_env(config.env_id, config.control_hz), config.env_id, config.seed,
+    log = record_human_episode(cached_env(config.env_id, config.control_hz), config.env_id, config.seed,
                                episode, config.control_hz, config.episode_s)
     log.save(path)
+
+
+def _table_record(spec: str, base: dict, metrics: dict, collided: bool, off_road: bool,
+                  drive: dict | None) -> dict:
+    """One Table I row as an `EpisodeRecord` dict. Distance and simulated time are the recorded
+    states' (the same for the human's log and a driven episode); speed, gap and plan times come
+    from the drive (`drive_episode`'s record) and are None for the human, who is not driven."""
+    metrics = dict(metrics)
+    drive = drive or {"mean_speed_mps": None, "min_gap_m": None, "plan_calls": 0,
+                      "plan_ms_median": None, "plan_ms_mean": None, "plan_ms_p90": None}
+    return EpisodeRecord(
+        planner=spec, collided=bool(collided), off_road=bool(off_road),
+        simulated_s=metrics.pop("simulated_s"), distance_m=metrics.pop("distance_m"),
+        mean_speed_mps=drive["mean_speed_mps"], min_gap_m=drive["min_gap_m"],
+        plan_calls=drive["plan_calls"], plan_ms_median=drive["plan_ms_median"],
+        plan_ms_mean=drive["plan_ms_mean"], plan_ms_p90=drive["plan_ms_p90"],
+        extra={**base, **metrics}).as_dict()
 
 
 def planner_task(config: EvalConfig, out: Path, spec: str, episode: int) -> dict:
@@ -164,13 +170,12 @@ def planner_task(config: EvalConfig, out: Path, spec: str, episode: int) -> dict
 
     log = HumanLog.load(_log_path(out, episode))
     human_xy = log.ego_xy()
-    base = {"planner": spec, "label": planner_label(spec), "episode": episode, "mode": config.mode}
+    base = {"label": planner_label(spec), "episode": episode, "mode": config.mode}
     if spec == "idm":
         metrics = trajectory_metrics(log.states, log.valid, log.sizes, log.ego_id, log.dt_s, human_xy,
                                      config.safety)
-        return {**base, **metrics, "collided": log.crashed, "off_road": log.off_road,
-                "plan_ms_mean": None, "plan_ms_p90": None, "plan_calls": 0}
-    env = _env(config.env_id, config.control_hz)
+        return _table_record(spec, base, metrics, log.crashed, log.off_road, None)
+    env = cached_env(config.env_id, config.control_hz)
     planner = _planner(spec, config.seed)
     replay = isinstance(planner, ReplayPlanner)
     if replay:
@@ -186,9 +191,7 @@ def planner_task(config: EvalConfig, out: Path, spec: str, episode: int) -> dict
     states, valid, sizes, _ = run.recorder.arrays()
     metrics = trajectory_metrics(states, valid, sizes, run.recorder.ego_id, run.dt, human_xy,
                                  config.safety)
-    return {**base, **metrics, "collided": record["collided"], "off_road": record["off_road"],
-            "plan_ms_mean": record["plan_ms_mean"], "plan_ms_p90": record["plan_ms_p90"],
-            "plan_calls": record["plan_calls"]}
+    return _table_record(spec, base, metrics, record["collided"], record["off_road"], record)
 
 
 def _run_planner_task(config: EvalConfig, out: Path, spec: str, episode: int) -> tuple[str, int, dict]:
@@ -234,7 +237,7 @@ def markdown_table(config: EvalConfig, table: dict) -> str:
         lines.append(
             f"| {entry['label']} | {entry['episodes']} | {pair('safety_pct', 1)} | {pair('ade_m')} | "
             f"{pair('goal_error_m')} | {100 * entry['collided_rate']:.0f}% | "
-            f"{100 * entry['off_road_rate']:.0f}% | {pair('progress_m', 0)} | {pair('jerk_mps3')} | "
+            f"{100 * entry['off_road_rate']:.0f}% | {pair('distance_m', 0)} | {pair('jerk_mps3')} | "
             f"{pair('plan_ms_mean', 1)} |")
     return "\n".join(lines) + "\n"
 
@@ -270,24 +273,13 @@ def evaluate(config: EvalConfig, out: Path, workers: int = 1, resume: bool = Fal
     todo = [(s, e) for e in range(config.episodes) for s in config.planners
             if not _result_path(out, s, e).exists()]
     bar = tqdm(total=len(todo_logs) + len(todo), disable=not progress, desc=f"evaluate {config.env_id}")
-    if workers > 1:
-        with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:
-            for future in as_completed([pool.submit(record_task, config, out, e) for e in todo_logs]):
-                future.result()
-                bar.update()
-            for future in as_completed([pool.submit(_run_planner_task, config, out, s, e)
-                                        for s, e in todo]):
-                future.result()
-                bar.update()
-    else:
-        for e in todo_logs:
-            record_task(config, out, e)
-            bar.update()
-        for s, e in todo:
-            _run_planner_task(config, out, s, e)
-            bar.update()
+    # Every human episode is recorded before any planner drives it (planners replay the record).
+    for _ in run_parallel(_record_task, [(config, out, e) for e in todo_logs], workers):
+        bar.update()
+    for _ in run_parallel(_planner_task, [(config, out, s, e) for s, e in todo], workers):
+        bar.update()
     bar.close()
-    records = [json.loads(_result_path(out, s, e).read_text())
+    records = [current_names(json.loads(_result_path(out, s, e).read_text()))
                for s in config.planners for e in range(config.episodes)]
     atomic_write(out / "episodes.csv", lambda f: f.write(_csv_text(list(CSV_FIELDS), records).encode()))
     table = summarise(config, records)

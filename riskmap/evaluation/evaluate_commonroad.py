@@ -26,8 +26,10 @@ from riskmap.data.collect_commonroad import CommonRoadCollectConfig, demonstrato
 from riskmap.evaluation.evaluate import planner_slug
 from riskmap.infra.atomic import write_json
 from riskmap.infra.provenance import provenance
+from riskmap.sim.record import current_names
 
 METRICS = ("safety_pct", "ade_m", "goal_error_m", "distance_m", "human_distance_m", "min_gap_m")
+GAP_CAP_M = 1e3       # a min gap of None (nobody within the gap radius) counts as this far
 
 
 def _planner(spec: str, traffic: RecordedTraffic, vehicle_id: int, seed: int, loaded: dict):
@@ -48,7 +50,8 @@ def _planner(spec: str, traffic: RecordedTraffic, vehicle_id: int, seed: int, lo
 
 def summarise(records: list[dict]) -> dict:
     def stats(key):
-        values = np.array([min(r[key], 1e3) for r in records], dtype=float)
+        values = np.array([GAP_CAP_M if r[key] is None else min(r[key], GAP_CAP_M) for r in records],
+                          dtype=float)
         return {"mean": float(values.mean()), "p90": float(np.percentile(values, 90))}
 
     return {"episodes": len(records),
@@ -108,7 +111,7 @@ def evaluate_commonroad(recordings: list[str | Path], planners: tuple[str, ...],
         for traffic, vehicle in tqdm(episodes, disable=not progress, desc=f"evaluate {spec}"):
             path = out / "episodes" / planner_slug(spec) / f"{traffic.name}_{vehicle}.json"
             if resume and path.exists():
-                records[spec].append(json.loads(path.read_text()))
+                records[spec].append(current_names(json.loads(path.read_text())))
                 continue
             result = replay_commonroad_episode(traffic, vehicle,
                                                _planner(spec, traffic, vehicle, seed, loaded))

@@ -40,6 +40,7 @@ from rasterize.scene import STATE_DIM, Scene
 from riskmap.sim.control import planned_vehicle_class
 from riskmap.sim.metrics import SafetyConfig, centre_off_lane, dangerous_encounters, safety_pct
 from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, Plan
+from riskmap.sim.record import EpisodeRecord
 from riskmap.sim.rollout import LoopConfig, drive_world
 
 
@@ -278,7 +279,8 @@ def _human_metrics(world: CommonRoadWorld) -> dict:
 def replay_commonroad_episode(scenario_path, ego_id: int, planner, start_s: float | None = None,
                               duration_s: float | None = None, config: ReplayConfig | None = None,
                               scene_config: CommonRoadSceneConfig | None = None) -> dict:
-    """Drive recorded vehicle `ego_id` of a CommonRoad file with `planner`; returns metrics.
+    """Drive recorded vehicle `ego_id` of a CommonRoad file with `planner`; returns its
+    `EpisodeRecord` as a dict (extras: scenario, ego_id, start_s, collision and `_human_metrics`).
 
     `scenario_path`: a .xml path or a `RecordedTraffic`. `start_s` defaults to the vehicle's first
     time with `config.history_s` of history; the episode ends with its recording (or after
@@ -291,17 +293,9 @@ def replay_commonroad_episode(scenario_path, ego_id: int, planner, start_s: floa
     loop = drive_world(world, planner, LoopConfig(world.n_steps, config.control_hz // config.replan_hz,
                                                   config.history_s, config.gap_radius_m))
     human = _human_metrics(world)
-    speeds, gaps, plan_times = loop.speeds, loop.gaps, loop.plan_times_s
-    return {
-        "scenario": traffic.name, "ego_id": int(ego_id), "planner": type(planner).__name__,
-        "start_s": round(world.start, 3), "simulated_s": round(world.time_s - world.start, 3),
-        "collided": world.crashed, "collision": world.collision, "off_road": world.off_network,
-        "distance_m": loop.distance_m, "human_distance_m": human["human_distance_m"],
-        "mean_speed_mps": float(np.mean(speeds)) if speeds else 0.0,
-        "min_gap_m": float(min(gaps)) if gaps else float("inf"),
-        "dangerous": human["dangerous"], "encounters": human["encounters"],
-        "safety_pct": human["safety_pct"], "ade_m": human["ade_m"],
-        "goal_error_m": human["goal_error_m"],
-        "plan_ms_median": 1000 * float(np.median(plan_times)) if plan_times else None,
-        "plan_calls": len(plan_times),
-    }
+    record = EpisodeRecord.measured(
+        type(planner).__name__, world.crashed, world.off_network, round(world.time_s - world.start, 3),
+        loop.distance_m, loop.speeds, loop.gaps, loop.plan_times_s,
+        extra={"scenario": traffic.name, "ego_id": int(ego_id), "start_s": round(world.start, 3),
+               "collision": world.collision, **human})
+    return record.as_dict()

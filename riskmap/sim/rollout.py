@@ -21,6 +21,7 @@ from rasterize.frames import ego_pose
 from riskmap.sim.control import ControllerConfig, TrackingController
 from riskmap.sim.episode import FAMILY_SETUPS, Episode
 from riskmap.sim.plan import check_plan
+from riskmap.sim.record import EpisodeRecord
 
 
 @dataclass(frozen=True)
@@ -164,23 +165,16 @@ def drive_episode(env, planner, config: DriveConfig, episode: int, hooks: DriveH
                   run: Episode | None = None) -> dict:
     """Drive one closed-loop episode; `hooks` perturb or observe it (see `DriveHooks`). `run`: an
     already reset Episode to drive instead of a fresh one (for instance one whose traffic replays
-    a log; `hooks.setup` is then not used); the caller can read its recorder afterwards."""
+    a log; `hooks.setup` is then not used); the caller can read its recorder afterwards. Returns
+    the episode's `EpisodeRecord` as a dict (extras: episode, env_seed, driver)."""
     if run is None:
         run = Episode(env, config.env_id, config.seed, episode, config.control_hz,
                       setup=hooks.setup)
     loop = LoopConfig(round(config.episode_s * config.control_hz),
                       config.control_hz // config.replan_hz, config.history_s, config.gap_radius_m)
-    record = drive_world(run, planner, loop, hooks)
-    plan_times, speeds, gaps = record.plan_times_s, record.speeds, record.gaps
-    return {
-        "episode": episode, "env_seed": run.seed, "driver": run.driver,
-        "planner": "idm" if record.drives_itself else type(planner).__name__,
-        "collided": run.crashed, "off_road": run.off_network,
-        "simulated_s": round(run.time_s, 3), "distance_m": record.distance_m,
-        "mean_speed_mps": float(np.mean(speeds)) if speeds else 0.0,
-        "min_gap_m": float(min(gaps)) if gaps else float("inf"),
-        "plan_ms_median": 1000 * float(np.median(plan_times)) if plan_times else None,
-        "plan_ms_mean": 1000 * float(np.mean(plan_times)) if plan_times else None,
-        "plan_ms_p90": 1000 * float(np.percentile(plan_times, 90)) if plan_times else None,
-        "plan_calls": len(plan_times),
-    }
+    loop_record = drive_world(run, planner, loop, hooks)
+    record = EpisodeRecord.measured(
+        "idm" if loop_record.drives_itself else type(planner).__name__, run.crashed, run.off_network,
+        round(run.time_s, 3), loop_record.distance_m, loop_record.speeds, loop_record.gaps,
+        loop_record.plan_times_s, extra={"episode": episode, "env_seed": run.seed, "driver": run.driver})
+    return record.as_dict()

@@ -106,7 +106,7 @@ def test_a_crash_job_record_has_the_campaign_fields_and_the_attack(crash_campaig
         assert p[0] == 0.0 and abs(sum(p) - 1.0) < 1e-3 and p[extra["adversary_row"]] == max(p)
         assert isinstance(r["collided"], bool) and r["collided_with_adversary"] <= r["collided"]
         assert (r["kinematic_mps"] is not None) == r["collided_with_adversary"]
-        assert r["progress_m"] > 10.0 and r["simulated_s"] == 8.0 and r["safety_pct"] is None
+        assert r["distance_m"] > 10.0 and r["simulated_s"] == 8.0 and r["safety_pct"] is None
         assert r["timing"]["wall_s"] > 0 and r["timing"]["attack_seconds"] > 0
         with np.load(crash_campaign / "artifacts" / f"{r['job_id']}.npz") as data:
             assert data["crash_panel_png"][:4].tobytes() == b"\x89PNG"

@@ -28,7 +28,7 @@ def test_every_job_has_one_record_with_the_fields_of_the_brief(tiny_campaign):
     assert len(records) == 12 and all(r["status"] == "ok" for r in records)
     for r in records:
         for key in ("collided", "collided_with_adversary", "adversary_off_road", "other_off_road",
-                    "kinematic_mps", "solution_found", "safety_pct", "progress_m", "error"):
+                    "kinematic_mps", "solution_found", "safety_pct", "distance_m", "error"):
             assert key in r
         assert 0.0 <= r["safety_pct"] <= 100.0
         assert r["has_adversary"] == (r["attack"] != "natural")
@@ -37,7 +37,7 @@ def test_every_job_has_one_record_with_the_fields_of_the_brief(tiny_campaign):
         assert (tiny_campaign / "artifacts" / f"{r['job_id']}.npz").is_file()
     natural_cv = [r for r in records if r["planner"] == "cv" and r["attack"] == "natural"]
     # cv keeps the speed and heading: 3 s of progress at its start speed, on a straight road.
-    assert all(r["progress_m"] > 30 for r in natural_cv)
+    assert all(r["distance_m"] > 30 for r in natural_cv)
 
 
 def test_interrupted_and_resumed_campaign_gives_the_same_report(tiny_campaign, tmp_path):

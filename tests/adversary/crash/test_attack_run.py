@@ -75,7 +75,7 @@ def test_crash_selector_closed_loop_batch_and_bad_input(scenes, selectors, tmp_p
 def test_summary_counts_every_scene_in_the_denominator():
     ok = {"status": "ok", "collision": True, "seconds": 1.0, "timing": {"rollouts": 1},
           "generation": {"iterations": 10, "replans": 0},
-          "metrics": {"adversary_off_road": False, "other_off_road": True, "ego_off_road": False,
+          "metrics": {"adversary_off_road": False, "other_off_road": True, "off_road": False,
                       "kinematic_value_mps": 4.0, "solution_found": True, "collision_type": "cut-in"}}
     miss = {"status": "no_candidate", "collision": False, "seconds": 0.5}
     s = summarise([ok, miss])

@@ -95,7 +95,7 @@ def test_untouched_record_gives_no_collision(record):
     metrics = judge(record, np.zeros((0, 12, 6)), [], AHEAD, planner, "replay")
     assert not metrics["collision"] and not metrics["collision_any"]
     assert metrics["collision_type"] is None and metrics["kinematic_value_mps"] is None
-    assert metrics["min_gap_m"] > 0.5 and metrics["ego_progress_m"] > 60.0
+    assert metrics["min_gap_m"] > 0.5 and metrics["distance_m"] > 60.0
 
 
 def test_off_road_adversary_is_flagged(record):

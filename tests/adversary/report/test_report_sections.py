@@ -15,14 +15,14 @@ def _record(job_id, planner, attack, category, collided, extra=None):
     return {"job_id": job_id, "planner": planner, "env_id": "highway-v0", "scene_seed": 0,
             "episode": 0, "attack": attack, "attack_name": attack, "attack_category": category,
             "attack_params": {}, "status": "ok", "error": None, "collided": collided,
-            "ego_off_road": False, "has_adversary": category != "baseline",
+            "off_road": False, "has_adversary": category != "baseline",
             "collided_with_adversary": collided and category != "baseline",
             "collision_type": "sideswipe" if collided else None, "collision_time_s": 1.0 if collided else None,
             "kinematic_mps": 4.0 if collided else None,
             "adversary_off_road": False if category != "baseline" else None, "other_off_road": False,
             "encounters": 10, "dangerous_encounters": 3 if collided else 1,
             "safety_pct": 30.0 if collided else 10.0, "solution_found": True if collided else None,
-            "progress_m": 50.0, "attack_extra": extra or {}, "timing": {"wall_s": 1.0}}
+            "distance_m": 50.0, "attack_extra": extra or {}, "timing": {"wall_s": 1.0}}
 
 
 def test_selection_search_and_guard_sections_render(tmp_path):
