@@ -47,7 +47,7 @@ def anyspeed_guard(inner_spec: str, seed: int, checkpoint: str = ""):
     from riskmap.guard.predictor import AccidentPredictor
     from riskmap.guard.system2 import DecelerationAgent, System2Config
     from riskmap.registry import make_planner
-    from riskmap.sim.plan import HumanDriver
+    from riskmap.sim.plan import drives_itself
 
     families = GuardConfig().speed_threshold_mps
     config = GuardConfig(trigger="tgat", speed_threshold_mps={family: 0.0 for family in families},
@@ -55,7 +55,7 @@ def anyspeed_guard(inner_spec: str, seed: int, checkpoint: str = ""):
     predictor = AccidentPredictor.load(checkpoint or GUARD_CHECKPOINT)
     agent = DecelerationAgent(System2Config(decel_mps2=config.decel_mps2, control_hz=config.decision_hz))
     inner = make_planner(inner_spec, seed=seed)
-    if isinstance(inner, HumanDriver):
+    if drives_itself(inner):
         return GuardedHumanDriver(predictor, agent, config)
     return GuardedPlanner(inner, predictor, agent, config)
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from adversary.attacks.monitor import EpisodeMonitor
 from riskmap.registry import cached_planner
-from riskmap.sim.plan import HumanDriver
+from riskmap.sim.plan import drives_itself
 from riskmap.sim.record import EpisodeRecord
 
 
@@ -120,7 +120,7 @@ def drive_with_hooks(job, factory) -> tuple[dict, bytes]:
                          episode_s=job.budget.episode_s)
     planner = cached_planner(job.planner, job.planner_seed)
     env = cached_env(job.env_id, job.budget.control_hz)
-    recording = None if isinstance(planner, HumanDriver) else RecordingPlanner(planner)
+    recording = None if drives_itself(planner) else RecordingPlanner(planner)
     attack = factory(job.attack_params, attack_seed(job))
     monitor = EpisodeMonitor(attack, job.safety, job.budget.control_hz)
     episode = drive_episode(env, recording or planner, config,

@@ -27,7 +27,7 @@ from adversary.attacks.episode import RecordingPlanner, artifact_of, record_of
 from adversary.attacks.monitor import EpisodeMonitor
 from adversary.search.scenarios import ENV_ID, TEMPLATES
 from riskmap.infra.config_mapping import require
-from riskmap.sim.plan import HumanDriver
+from riskmap.sim.plan import drives_itself
 
 SEARCH_ATTACKS = {"nsga2_search": "nsga2", "random_search": "random"}   # attack -> algorithm
 SEARCH_ENV_ID = ENV_ID                 # the only env a template builds its road in
@@ -99,7 +99,7 @@ def search_and_replay(job) -> tuple[dict, bytes]:
     recordings = []
 
     def wrap(planner):
-        recordings.append(None if isinstance(planner, HumanDriver) else RecordingPlanner(planner))
+        recordings.append(None if drives_itself(planner) else RecordingPlanner(planner))
         return recordings[0] or planner
 
     episode, _ = run_scenario(template, np.asarray(outcome.best_x), config.evaluation,

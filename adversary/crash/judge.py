@@ -161,7 +161,8 @@ def rollout(record: SceneRecord, tracks: np.ndarray, rows, planner, planner_spec
             control_hz: int = 10, replan_hz: int = 2) -> Rollout:
     """Drive `planner` (made from `planner_spec`) against the log spliced with `tracks` at `rows`
     (module docstring). Empty `rows` (tracks [0, F, 6]) drives against the untouched record."""
-    from riskmap.sim.log_replay import LogReplayEpisode, ReplayPlanner
+    from riskmap.sim.log_replay import LogReplayEpisode
+    from riskmap.sim.plan import requires_log
     from riskmap.sim.rollout import DriveConfig, DriveHooks, drive_episode
 
     started = time.perf_counter()
@@ -170,7 +171,7 @@ def rollout(record: SceneRecord, tracks: np.ndarray, rows, planner, planner_spec
         raise InputError(f"control_hz={control_hz} differs from the record's {1 / record.log.dt_s:g} Hz")
     log = splice_tracks(record, tracks, rows)
     env = cached_env(scene.env_id, control_hz)
-    replay = isinstance(planner, ReplayPlanner)
+    replay = requires_log(planner)
     if replay:
         planner.set_log(log)          # the ego's own record is never spliced
     run = LogReplayEpisode(env, scene.env_id, scene.scene_seed, scene.episode, log, control_hz,

@@ -165,7 +165,8 @@ def _table_record(spec: str, base: dict, metrics: dict, collided: bool, off_road
 def planner_task(config: EvalConfig, out: Path, spec: str, episode: int) -> dict:
     """Drive (or, for `idm`, read) one episode; returns its record of metrics."""
     from riskmap.sim.episode import Episode
-    from riskmap.sim.log_replay import HumanLog, LogReplayEpisode, ReplayPlanner
+    from riskmap.sim.log_replay import HumanLog, LogReplayEpisode
+    from riskmap.sim.plan import requires_log
     from riskmap.sim.rollout import DriveConfig, drive_episode
 
     log = HumanLog.load(_log_path(out, episode))
@@ -177,7 +178,7 @@ def planner_task(config: EvalConfig, out: Path, spec: str, episode: int) -> dict
         return _table_record(spec, base, metrics, log.crashed, log.off_road, None)
     env = cached_env(config.env_id, config.control_hz)
     planner = _planner(spec, config.seed)
-    replay = isinstance(planner, ReplayPlanner)
+    replay = requires_log(planner)
     if replay:
         planner.set_log(log)
     if config.mode == "log":

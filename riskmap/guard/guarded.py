@@ -31,7 +31,7 @@ from rasterize.scene import Scene
 from riskmap.guard.events import nearest_neighbours
 from riskmap.guard.features import OBSERVED, SEGMENT_S
 from riskmap.registry import make_planner
-from riskmap.sim.plan import PLAN_DT_S, HumanDriver, Plan
+from riskmap.sim.plan import PLAN_DT_S, HumanDriver, Plan, drives_itself
 
 GUARD_CHECKPOINT = "checkpoints/guard_tgat"
 LOG = logging.getLogger("riskmap.guard")
@@ -247,7 +247,7 @@ def make_guarded(trigger: str, inner_spec: str, seed: int = 0, checkpoint: str =
             predictor.alert_threshold = float(alert_threshold)
     agent = DecelerationAgent(System2Config(decel_mps2=config.decel_mps2, control_hz=config.decision_hz))
     inner = make_planner(inner_spec, seed=seed)
-    if isinstance(inner, HumanDriver):
+    if drives_itself(inner):
         return GuardedHumanDriver(predictor, agent, config)
     return GuardedPlanner(inner, predictor, agent, config)
 

@@ -203,9 +203,12 @@ class LogReplayEpisode(Episode):
 class ReplayPlanner:
     """`replay`: the human's recorded trajectory as the plan (log playback).
 
-    Needs the recorded episode (`set_log`): meaningful only where the traffic replays that same
-    record (`riskmap evaluate --mode log`); with reactive traffic the record no longer fits.
+    Needs the recorded episode: it declares `requires_log`, and whoever drives it hands the log
+    over with `set_log` (nuPlan's `requires_scenario`). Meaningful only where the traffic replays
+    that same record (`riskmap evaluate --mode log`); with reactive traffic the record no longer fits.
     """
+
+    requires_log = True       # set_log(HumanLog) before driving; the ego replays the record
 
     def __init__(self):
         self._times_s = self._xy = None

@@ -38,9 +38,27 @@ class Plan:
 
 @runtime_checkable
 class Planner(Protocol):
+    """What drives the ego: `reset` once per episode, `plan` at every replan (2 Hz).
+
+    Optional declarations the rollout reads (it never tests a planner's class):
+      drives_itself = True   the world's own IDM/MOBIL ego keeps driving; no plans (`HumanDriver`)
+      requires_log = True    needs the recorded episode: `set_log(log)` is called before driving
+      attach(world)          called once the ego is set up (the guard installs itself there)
+    """
+
     def reset(self, scene: Scene) -> None: ...
 
     def plan(self, scene: Scene) -> Plan: ...
+
+
+def drives_itself(planner) -> bool:
+    """Whether `planner` declares that the world's own IDM/MOBIL ego keeps driving (`HumanDriver`)."""
+    return bool(getattr(planner, "drives_itself", False))
+
+
+def requires_log(planner) -> bool:
+    """Whether `planner` declares that it needs the recorded episode (`set_log`)."""
+    return bool(getattr(planner, "requires_log", False))
 
 
 def check_plan(plan: Plan, name: str) -> Plan:

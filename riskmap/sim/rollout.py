@@ -20,7 +20,7 @@ from rasterize.errors import InputError
 from rasterize.frames import ego_pose
 from riskmap.sim.control import ControllerConfig, TrackingController
 from riskmap.sim.episode import FAMILY_SETUPS, Episode
-from riskmap.sim.plan import check_plan
+from riskmap.sim.plan import check_plan, drives_itself
 from riskmap.sim.record import EpisodeRecord
 
 
@@ -87,11 +87,6 @@ class LoopRecord:
     speeds: list[float]
     gaps: list[float]
     plan_times_s: list[float]
-
-
-def drives_itself(planner) -> bool:
-    """A planner that declares `drives_itself` (`HumanDriver`) keeps the world's ego driving."""
-    return bool(getattr(planner, "drives_itself", False))
 
 
 class _Tracker:
