@@ -30,6 +30,7 @@ from rasterize.errors import InputError
 from riskmap.infra.atomic import atomic_write, write_json
 from riskmap.infra.parallel import run_parallel
 from riskmap.infra.provenance import provenance
+from riskmap.infra.rundir import claim_out_dir
 from riskmap.registry import cached_planner
 from riskmap.sim.episode import FAMILY_SETUPS, cached_env
 from riskmap.sim.metrics import (
@@ -244,20 +245,12 @@ def markdown_table(config: EvalConfig, table: dict) -> str:
 
 
 def _check_out(config: EvalConfig, out: Path, resume: bool) -> dict:
-    meta = {"config": asdict(config), **provenance()}
-    run_json = out / "run.json"
-    if run_json.exists():
-        if not resume:
-            raise InputError(f"--out {out} already holds an evaluation; pass --resume to continue "
-                             "it or choose another --out")
-        previous = json.loads(run_json.read_text())["config"]
-        # More episodes or planners may be added on resume; nothing else may change.
-        fixed = {k: v for k, v in meta["config"].items() if k not in ("episodes", "planners")}
-        if {k: v for k, v in previous.items() if k in fixed} != fixed:
-            raise InputError(f"--out {out} was evaluated with other settings; resume with the same "
-                             "--env, --seed and --mode (only --episodes and --planners may change)")
-    write_json(run_json, meta)
-    return meta
+    # More episodes or planners may be added on resume; nothing else may change.
+    settings = {"config": asdict(config)}
+    claim_out_dir(out, holds="an evaluation", marker="run.json", resume=resume, settings_file="run.json",
+                  settings=settings, may_change=("config.episodes", "config.planners"),
+                  differs="other settings (only --episodes and --planners may change)")
+    return {**settings, **provenance()}
 
 
 def evaluate(config: EvalConfig, out: Path, workers: int = 1, resume: bool = False,

@@ -25,7 +25,7 @@ from rasterize.errors import InputError
 from riskmap.data.collect_commonroad import CommonRoadCollectConfig, demonstrators, scenario_files
 from riskmap.evaluation.evaluate import planner_slug
 from riskmap.infra.atomic import write_json
-from riskmap.infra.provenance import provenance
+from riskmap.infra.rundir import claim_out_dir
 from riskmap.sim.record import current_names
 
 METRICS = ("safety_pct", "ade_m", "goal_error_m", "distance_m", "human_distance_m", "min_gap_m")
@@ -89,14 +89,8 @@ def evaluate_commonroad(recordings: list[str | Path], planners: tuple[str, ...],
     out = Path(out)
     files = scenario_files(recordings)
     meta = {"recordings": [str(p) for p in files], "planners": list(planners), "seed": seed}
-    if (out / "run.json").exists():
-        if not resume:
-            raise InputError(f"--out {out} already holds an evaluation; pass --resume or choose "
-                             "another --out")
-        previous = json.loads((out / "run.json").read_text())
-        if {k: previous.get(k) for k in meta} != meta:
-            raise InputError(f"--out {out} was evaluated with other settings; choose another --out")
-    write_json(out / "run.json", {**meta, **provenance()})
+    claim_out_dir(out, holds="an evaluation", marker="run.json", resume=resume, settings_file="run.json",
+                  settings=meta)
     config = CommonRoadCollectConfig(files=())
     episodes = []
     for path in files:
