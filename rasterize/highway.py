@@ -201,6 +201,10 @@ class TrafficRecorder:
         self.num_steps = 0
         self._cache = None
 
+    def known_id(self, obj) -> int | None:
+        """The agent id `obj` is recorded under (its own, or the one it adopted), None if none."""
+        return self._ids.get(id(obj))
+
     def _agent_id(self, obj) -> int:
         key = id(obj)
         if key not in self._ids:

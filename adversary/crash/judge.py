@@ -142,21 +142,6 @@ def _no_contact_response(run) -> None:
     run.ego.collidable = False
 
 
-def _match_log_ids(states: np.ndarray, valid: np.ndarray, ego: int, log: HumanLog) -> np.ndarray:
-    """Log agent of each recorder agent: the one at the same place at its first recorded step."""
-    log_ids = np.full(len(states), -1, dtype=np.int64)
-    log_ids[ego] = log.ego_id
-    for agent in range(len(states)):
-        if agent == ego or not valid[agent].any():
-            continue
-        k = int(np.argmax(valid[agent]))
-        candidates = np.flatnonzero(log.valid[:, k])
-        dist = np.abs(log.states[candidates, k, :2] - states[agent, k, :2]).max(axis=1)
-        if len(dist) and dist.min() < 1e-6:
-            log_ids[agent] = candidates[int(np.argmin(dist))]
-    return log_ids
-
-
 def rollout(record: SceneRecord, tracks: np.ndarray, rows, planner, planner_spec: str,
             control_hz: int = 10, replan_hz: int = 2) -> Rollout:
     """Drive `planner` (made from `planner_spec`) against the log spliced with `tracks` at `rows`
@@ -181,10 +166,9 @@ def rollout(record: SceneRecord, tracks: np.ndarray, rows, planner, planner_spec
     drive = drive_episode(env, planner, config, scene.episode, run=run,
                           hooks=DriveHooks(on_ready=(_no_contact_response,)))
     states, valid, sizes, _ = run.recorder.arrays()
-    n = len(sizes)        # the recorder's arrays may carry empty rows for adopted vehicles
-    states, valid = states[:n].copy(), valid[:n].copy()
+    states, valid = states.copy(), valid.copy()
     ego = run.recorder.ego_id
-    return Rollout(states, valid, sizes.copy(), ego, _match_log_ids(states, valid, ego, log), log.dt_s,
+    return Rollout(states, valid, sizes.copy(), ego, run.log_ids(), log.dt_s,
                    record.t0_step, planner_spec, drive, time.perf_counter() - started)
 
 

@@ -143,6 +143,7 @@ class LogReplayEpisode(Episode):
         self.log, self.replay_ego = log, replay_ego
         self.next_step = 0
         self._replayed: dict[int, object] = {}     # log agent -> its ReplayVehicle on the road
+        self._replays: list[tuple[object, int]] = []   # every (ReplayVehicle, log agent) ever made
         self._cls = replay_vehicle_class()
         road, ego = self.base.road, self.ego
         ego_xy = self.recorder.latest_state(self.recorder.ego_id)[:2]
@@ -164,7 +165,21 @@ class LogReplayEpisode(Episode):
         vehicle = self._cls(self.base.road, self.log.states[agent], self.log.sizes[agent], self, step)
         self.base.road.vehicles.append(vehicle)
         self._replayed[agent] = vehicle
+        self._replays.append((vehicle, agent))
         return vehicle
+
+    def log_ids(self) -> np.ndarray:
+        """[A]: the log agent each recorder agent replays (the ego: the log's ego; -1: none).
+
+        Known by construction, since every replayed vehicle is made for one log agent: the
+        rollout keeps agent ids, nothing is matched by position afterwards."""
+        ids = np.full(len(self.recorder.arrays()[2]), -1, dtype=np.int64)
+        for vehicle, agent in self._replays:
+            recorder_id = self.recorder.known_id(vehicle)
+            if recorder_id is not None:
+                ids[recorder_id] = agent
+        ids[self.recorder.ego_id] = self.log.ego_id
+        return ids
 
     def replace_ego(self, vehicle) -> None:
         if self.replay_ego:

@@ -109,3 +109,23 @@ def test_evaluate_writes_tables_and_resumes_without_recomputing(tmp_path, monkey
         evaluate(EvalConfig(ENV, ("idm",), 2, seed=12, episode_s=2.0), out, resume=True, progress=False)
     log = HumanLog.load(out / "logs" / "episode_000000.npz")
     assert log.num_steps == 21 and log.dt_s == pytest.approx(0.1)
+
+
+@pytest.mark.slow
+def test_log_replay_keeps_agent_ids():
+    """Every replayed vehicle is recorded under an id whose log agent the replay knows by
+    construction; its recorded states equal the log's (nothing is matched by position)."""
+    from riskmap.registry import make_planner
+
+    env = make_env("highway-v0", 10)
+    log = record_human_episode(env, "highway-v0", 3, 0, 10, 4.0)
+    run = LogReplayEpisode(env, "highway-v0", 3, 0, log, 10)
+    drive_episode(env, make_planner("cv"), DriveConfig("highway-v0", 1, seed=3, episode_s=3.0), 0, run=run)
+    states, valid, _, _ = run.recorder.arrays()
+    ids = run.log_ids()
+    assert ids[run.recorder.ego_id] == log.ego_id
+    replayed = [a for a in range(len(ids)) if ids[a] >= 0 and a != run.recorder.ego_id]
+    assert len(replayed) > 5
+    for agent in replayed:
+        steps = np.flatnonzero(valid[agent])
+        np.testing.assert_allclose(states[agent, steps, :2], log.states[ids[agent], steps, :2], atol=1e-9)
