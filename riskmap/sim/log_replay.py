@@ -150,16 +150,18 @@ class LogReplayEpisode(Episode):
         if np.abs(log.states[log.ego_id, 0, :2] - ego_xy).max() > 1e-6:
             raise InputError("the recorded episode does not start where this episode does; it was "
                              "recorded with another env, seed or episode")
-        # The vehicles at step 0 are the ones the record starts with: each continues its own
-        # recorded agent, so histories stay whole.
-        start = [a for a in np.flatnonzero(log.valid[:, 0]) if a != log.ego_id]
+        # The vehicles at step 0 are the ones the record starts with, recorded in the same order
+        # by the same reset, so each has its log agent's id: its replay continues that agent.
         for vehicle in [v for v in road.vehicles if v is not ego]:
-            xy = world_from_highway_env(vehicle.position)
-            match = [a for a in start if np.abs(log.states[a, 0, :2] - xy).max() < 1e-6]
+            agent = self.recorder.known_id(vehicle)
             road.vehicles.remove(vehicle)
-            if match:
-                replay = self._add(match[0], 0)
-                self.recorder.adopt(replay, vehicle)
+            if agent is None or agent >= len(log.sizes) or not log.valid[agent, 0]:
+                continue
+            xy = world_from_highway_env(vehicle.position)
+            if np.abs(log.states[agent, 0, :2] - xy).max() > 1e-6:
+                raise InputError("the recorded episode's vehicles do not start where this episode's "
+                                 "do; it was recorded with another env, seed or episode")
+            self.recorder.adopt(self._add(agent, 0), vehicle)
 
     def _add(self, agent: int, step: int):
         vehicle = self._cls(self.base.road, self.log.states[agent], self.log.sizes[agent], self, step)
