@@ -58,6 +58,7 @@ class DriveHooks:
     on_plan(run, scene, plan, step): after every replan, with the scene the plan was made from
         (figures: `riskmap.figures.panels.plan_frame_writer`).
     on_step(run): after every control step (measurements, trajectory logging).
+    on_end(run, record): once, after the last step, with the loop's `LoopRecord`.
     """
 
     setup: Callable | None = None
@@ -66,6 +67,7 @@ class DriveHooks:
     perceive: Callable | None = None
     on_plan: Callable | None = None
     on_step: Callable | None = None
+    on_end: Callable | None = None
 
 
 @dataclass(frozen=True)
@@ -153,7 +155,10 @@ def drive_world(world, planner, config: LoopConfig, hooks: DriveHooks = DriveHoo
             hooks.on_step(world)
         if world.done:
             break
-    return LoopRecord(human, distance, speeds, gaps, [] if tracker is None else tracker.plan_times)
+    record = LoopRecord(human, distance, speeds, gaps, [] if tracker is None else tracker.plan_times)
+    if hooks.on_end is not None:
+        hooks.on_end(world, record)
+    return record
 
 
 def drive_episode(env, planner, config: DriveConfig, episode: int, hooks: DriveHooks = DriveHooks(),

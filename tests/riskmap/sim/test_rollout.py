@@ -30,12 +30,14 @@ class _SelfDriving:
 
 def test_a_planner_is_handed_the_ego_and_replans_at_the_replan_rate():
     env = cached_env(ENV)
-    planner, plans, egos = _Straight(), [], []
+    planner, plans, egos, ends = _Straight(), [], [], []
     hooks = DriveHooks(on_plan=lambda run, scene, plan, k: plans.append((k, scene.source)),
-                       on_ready=(lambda run: egos.append(type(run.ego).__name__),))
+                       on_ready=(lambda run: egos.append(type(run.ego).__name__),),
+                       on_end=lambda run, loop: ends.append((run.time_s, len(loop.plan_times_s))))
     record = drive_episode(env, planner, DriveConfig(ENV, 1, episode_s=2.0), 0, hooks)
     assert egos == ["PlannedVehicle"] and planner.reset_source == ""
     assert plans == [(k, ENV) for k in (0, 5, 10, 15)] and record["plan_calls"] == 4
+    assert ends == [(2.0, 4)]                                  # on_end once, after the last step
     assert record["planner"] == "_Straight" and record["simulated_s"] == 2.0
     assert record["distance_m"] > 0 and np.isfinite(record["min_gap_m"])
 
