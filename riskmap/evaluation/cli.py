@@ -37,7 +37,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
             raise InputError("--commonroad evaluates recorded vehicles in log mode: drop --env, "
                              "--episodes and --mode reactive")
         evaluate_commonroad(args.commonroad, planners, Path(args.out), seed=args.seed,
-                            resume=args.resume, progress=not args.quiet)
+                            resume=args.resume, progress=not args.quiet, workers=args.workers)
         print((Path(args.out) / "table.md").read_text(), end="")
         return 0
     if not args.env or not args.episodes:

@@ -24,7 +24,8 @@ from rasterize.commonroad import RecordedTraffic, load_scenario
 from rasterize.errors import InputError
 from riskmap.data.collect_commonroad import CommonRoadCollectConfig, demonstrators, scenario_files
 from riskmap.evaluation.evaluate import planner_slug
-from riskmap.infra.atomic import write_json
+from riskmap.infra.atomic import atomic_write, write_json
+from riskmap.infra.parallel import run_parallel
 from riskmap.infra.rundir import claim_out_dir
 from riskmap.sim.record import current_names
 
@@ -32,10 +33,20 @@ METRICS = ("safety_pct", "ade_m", "goal_error_m", "distance_m", "human_distance_
 GAP_CAP_M = 1e3       # a min gap of None (nobody within the gap radius) counts as this far
 
 
-def _planner(spec: str, traffic: RecordedTraffic, vehicle_id: int, seed: int, loaded: dict):
-    """The planner for one episode. `replay` is tied to its recording; any other SPEC is loaded
-    once into `loaded` and reused (each episode resets it, so results do not depend on order)."""
-    from riskmap.registry import make_planner
+_TRAFFIC: dict = {}
+
+
+def _traffic(path: Path) -> RecordedTraffic:
+    """This process's parsed recording of `path` (parsing a file takes about a second)."""
+    if path not in _TRAFFIC:
+        _TRAFFIC[path] = RecordedTraffic(load_scenario(path), path.stem)
+    return _TRAFFIC[path]
+
+
+def _planner(spec: str, traffic: RecordedTraffic, vehicle_id: int, seed: int):
+    """The planner for one episode. `replay` is tied to its recording; any other SPEC is made once
+    per process and reused (each episode resets it, so results do not depend on order)."""
+    from riskmap.registry import cached_planner
     from riskmap.sim.commonroad_replay import RecordedFuturePlanner
 
     if spec == "replay":
@@ -43,9 +54,25 @@ def _planner(spec: str, traffic: RecordedTraffic, vehicle_id: int, seed: int, lo
     if spec == "idm":
         raise InputError("--planners idm: on recordings the human is the recording itself; "
                          "use `replay`")
-    if spec not in loaded:
-        loaded[spec] = make_planner(spec, seed=seed)
-    return loaded[spec]
+    return cached_planner(spec, seed)
+
+
+def _episode_path(out: Path, spec: str, scenario: str, vehicle: int) -> Path:
+    return out / "episodes" / planner_slug(spec) / f"{scenario}_{vehicle}.json"
+
+
+def _run_episode(task: tuple) -> dict:
+    """Drive one (planner, recording, vehicle) episode and write its record; a worker's job."""
+    import torch
+
+    from riskmap.sim.commonroad_replay import replay_commonroad_episode
+
+    torch.set_num_threads(1)          # workers run side by side
+    spec, path, vehicle, seed, out = task
+    traffic = _traffic(path)
+    result = replay_commonroad_episode(traffic, vehicle, _planner(spec, traffic, vehicle, seed))
+    write_json(_episode_path(out, spec, traffic.name, vehicle), result)
+    return result
 
 
 def summarise(records: list[dict]) -> dict:
@@ -58,6 +85,9 @@ def summarise(records: list[dict]) -> dict:
             "safe_episodes_pct": 100.0 * float(np.mean([not (r["collided"] or r["off_road"])
                                                         for r in records])),
             "collision_rate": float(np.mean([r["collided"] for r in records])),
+            # A replayed vehicle cannot see the ego: hit from behind is the replay's doing, driving
+            # into a vehicle ahead the planner's (at fault).
+            "at_fault": int(sum(bool(r["collision"]) and r["collision"]["other_ahead"] for r in records)),
             "struck_from_behind": int(sum(bool(r["collision"]) and not r["collision"]["other_ahead"]
                                           for r in records)),
             "off_road_rate": float(np.mean([r["off_road"] for r in records])),
@@ -65,14 +95,14 @@ def summarise(records: list[dict]) -> dict:
 
 
 def markdown_table(results: dict) -> str:
-    lines = ["| planner | episodes | Safety % | safe episodes % | collisions (struck from behind) | "
+    lines = ["| planner | episodes | Safety % | safe episodes % | collisions (at fault / struck from behind) | "
              "off-road | ADE (m) | goal error (m) | driven (m) | human (m) |",
              "|---|---|---|---|---|---|---|---|---|---|"]
     for spec, s in results.items():
         lines.append(
             f"| {spec} | {s['episodes']} | {s['safety_pct']['mean']:.1f} / {s['safety_pct']['p90']:.1f} | "
             f"{s['safe_episodes_pct']:.0f} | "
-            f"{100 * s['collision_rate']:.0f}% ({s['struck_from_behind']}) | "
+            f"{100 * s['collision_rate']:.0f}% ({s['at_fault']} / {s['struck_from_behind']}) | "
             f"{100 * s['off_road_rate']:.0f}% | {s['ade_m']['mean']:.2f} / {s['ade_m']['p90']:.2f} | "
             f"{s['goal_error_m']['mean']:.2f} / {s['goal_error_m']['p90']:.2f} | "
             f"{s['distance_m']['mean']:.1f} | {s['human_distance_m']['mean']:.1f} |")
@@ -80,38 +110,38 @@ def markdown_table(results: dict) -> str:
 
 
 def evaluate_commonroad(recordings: list[str | Path], planners: tuple[str, ...], out: Path,
-                        seed: int = 0, resume: bool = False, progress: bool = True) -> dict:
-    """Run every planner on every recorded demonstrator; returns {planner: summary}."""
+                        seed: int = 0, resume: bool = False, progress: bool = True,
+                        workers: int = 1) -> dict:
+    """Run every planner on every recorded demonstrator (episodes on `workers` processes);
+    returns {planner: summary}."""
     from tqdm import tqdm
-
-    from riskmap.sim.commonroad_replay import replay_commonroad_episode
 
     out = Path(out)
     files = scenario_files(recordings)
-    meta = {"recordings": [str(p) for p in files], "planners": list(planners), "seed": seed}
-    claim_out_dir(out, holds="an evaluation", marker="run.json", resume=resume, settings_file="run.json",
-                  settings=meta)
     config = CommonRoadCollectConfig(files=())
     episodes = []
     for path in files:
-        traffic = RecordedTraffic(load_scenario(path), path.stem)
-        episodes += [(traffic, int(traffic.ids[agent])) for agent, _ in demonstrators(traffic, config)]
+        traffic = _traffic(path)
+        episodes += [(path, traffic.name, int(traffic.ids[agent]))
+                     for agent, _ in demonstrators(traffic, config)]
     if not episodes:
         raise InputError(f"no recorded vehicle in {', '.join(map(str, recordings))} has 2 s of "
                          "history and 6 s of future; nothing to evaluate")
-    records = {spec: [] for spec in planners}
-    loaded: dict = {}
-    for spec in planners:
-        for traffic, vehicle in tqdm(episodes, disable=not progress, desc=f"evaluate {spec}"):
-            path = out / "episodes" / planner_slug(spec) / f"{traffic.name}_{vehicle}.json"
-            if resume and path.exists():
-                records[spec].append(current_names(json.loads(path.read_text())))
-                continue
-            result = replay_commonroad_episode(traffic, vehicle,
-                                               _planner(spec, traffic, vehicle, seed, loaded))
-            write_json(path, result)
-            records[spec].append(result)
+    for spec in planners:           # a bad SPEC fails here, before anything is written
+        if spec != "replay":
+            _planner(spec, None, 0, seed)
+    meta = {"recordings": [str(p) for p in files], "planners": list(planners), "seed": seed}
+    claim_out_dir(out, holds="an evaluation", marker="run.json", resume=resume, settings_file="run.json",
+                  settings=meta)
+    todo = [(spec, path, vehicle, seed, out) for spec in planners for path, name, vehicle in episodes
+            if not (resume and _episode_path(out, spec, name, vehicle).exists())]
+    bar = tqdm(total=len(todo), disable=not progress, desc="evaluate recordings")
+    for _ in run_parallel(_run_episode, todo, workers):
+        bar.update()
+    bar.close()
+    records = {spec: [current_names(json.loads(_episode_path(out, spec, name, vehicle).read_text()))
+                      for _, name, vehicle in episodes] for spec in planners}
     results = {spec: summarise(rs) for spec, rs in records.items()}
     write_json(out / "results.json", {**meta, "results": results})
-    (out / "table.md").write_text(markdown_table(results))
+    atomic_write(out / "table.md", lambda f: f.write(markdown_table(results).encode()))
     return results

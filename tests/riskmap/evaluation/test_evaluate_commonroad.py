@@ -42,3 +42,17 @@ def test_cli_refuses_mixing_recordings_with_simulated_settings(tmp_path, capsys)
                  "highway-v0", "--out", str(tmp_path)]) == 2
     err = capsys.readouterr().err.strip()
     assert "--commonroad" in err and "\n" not in err
+
+
+def test_workers_give_the_same_records_and_bad_input_leaves_nothing(tmp_path):
+    one = evaluate_commonroad([FIXTURES], ("replay", "cv"), tmp_path / "one", progress=False)
+    two = evaluate_commonroad([FIXTURES], ("replay", "cv"), tmp_path / "two", progress=False, workers=2)
+    strip = lambda s: {k: v for k, v in s.items() if not k.startswith("plan_ms")}  # noqa: E731
+    assert {k: strip(v) for k, v in one.items()} == {k: strip(v) for k, v in two.items()}
+    for spec in ("replay", "cv"):
+        assert one[spec]["at_fault"] + one[spec]["struck_from_behind"] == round(
+            one[spec]["collision_rate"] * one[spec]["episodes"])
+    never = tmp_path / "never"
+    with pytest.raises(InputError, match="unknown planner spec"):
+        evaluate_commonroad([FIXTURES], ("replay", "nope:x"), never, progress=False)
+    assert not never.exists()
