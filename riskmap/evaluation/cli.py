@@ -37,9 +37,13 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
             raise InputError("--commonroad evaluates recorded vehicles in log mode: drop --env, "
                              "--episodes and --mode reactive")
         evaluate_commonroad(args.commonroad, planners, Path(args.out), seed=args.seed,
-                            resume=args.resume, progress=not args.quiet, workers=args.workers)
+                            resume=args.resume, progress=not args.quiet, workers=args.workers,
+                            goal=args.goal or "route")
         print((Path(args.out) / "table.md").read_text(), end="")
         return 0
+    if args.goal is not None:
+        raise InputError("--goal is for recordings (--commonroad); on simulated scenes the planner "
+                         "follows the route rule")
     if not args.env or not args.episodes:
         raise InputError("evaluate needs --env ENV and --episodes N (or --commonroad FILES)")
     config = EvalConfig(env_id=args.env, planners=planners, episodes=args.episodes, seed=args.seed,
@@ -88,6 +92,9 @@ def add_parsers(sub) -> None:
                         "cnn_lstm:PATH, rvsg:PATH")
     p.add_argument("--env", help="highway-env id (simulated scenes)")
     p.add_argument("--episodes", type=positive_int, help="episodes (simulated scenes)")
+    p.add_argument("--goal", choices=("route", "human"), default=None,
+                   help="with --commonroad: the route rule's goal (default) or the recorded "
+                        "vehicle's own end position (the planner paper's protocol)")
     p.add_argument("--commonroad", nargs="+", metavar="DIR_OR_FILE",
                    help="evaluate on recorded vehicles of CommonRoad files instead (log mode)")
     p.add_argument("--seed", type=int, default=0)

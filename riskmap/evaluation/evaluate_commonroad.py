@@ -65,12 +65,13 @@ def _run_episode(task: tuple) -> dict:
     """Drive one (planner, recording, vehicle) episode and write its record; a worker's job."""
     import torch
 
-    from riskmap.sim.commonroad_replay import replay_commonroad_episode
+    from riskmap.sim.commonroad_replay import ReplayConfig, replay_commonroad_episode
 
     torch.set_num_threads(1)          # workers run side by side
-    spec, path, vehicle, seed, out = task
+    spec, path, vehicle, seed, goal, out = task
     traffic = _traffic(path)
-    result = replay_commonroad_episode(traffic, vehicle, _planner(spec, traffic, vehicle, seed))
+    result = replay_commonroad_episode(traffic, vehicle, _planner(spec, traffic, vehicle, seed),
+                                       config=ReplayConfig(goal=goal))
     write_json(_episode_path(out, spec, traffic.name, vehicle), result)
     return result
 
@@ -111,12 +112,14 @@ def markdown_table(results: dict) -> str:
 
 def evaluate_commonroad(recordings: list[str | Path], planners: tuple[str, ...], out: Path,
                         seed: int = 0, resume: bool = False, progress: bool = True,
-                        workers: int = 1) -> dict:
-    """Run every planner on every recorded demonstrator (episodes on `workers` processes);
-    returns {planner: summary}."""
+                        workers: int = 1, goal: str = "route") -> dict:
+    """Run every planner on every recorded demonstrator (episodes on `workers` processes) towards
+    `goal` (riskmap.sim.commonroad_replay.ReplayConfig: route or human); returns {planner: summary}."""
+    from riskmap.sim.commonroad_replay import ReplayConfig
     from tqdm import tqdm
 
     out = Path(out)
+    ReplayConfig(goal=goal)           # validates the goal before any work
     files = scenario_files(recordings)
     config = CommonRoadCollectConfig(files=())
     episodes = []
@@ -130,10 +133,10 @@ def evaluate_commonroad(recordings: list[str | Path], planners: tuple[str, ...],
     for spec in planners:           # a bad SPEC fails here, before anything is written
         if spec != "replay":
             _planner(spec, None, 0, seed)
-    meta = {"recordings": [str(p) for p in files], "planners": list(planners), "seed": seed}
+    meta = {"recordings": [str(p) for p in files], "planners": list(planners), "seed": seed, "goal": goal}
     claim_out_dir(out, holds="an evaluation", marker="run.json", resume=resume, settings_file="run.json",
                   settings=meta)
-    todo = [(spec, path, vehicle, seed, out) for spec in planners for path, name, vehicle in episodes
+    todo = [(spec, path, vehicle, seed, goal, out) for spec in planners for path, name, vehicle in episodes
             if not (resume and _episode_path(out, spec, name, vehicle).exists())]
     bar = tqdm(total=len(todo), disable=not progress, desc="evaluate recordings")
     for _ in run_parallel(_run_episode, todo, workers):

@@ -15,6 +15,7 @@ was at the end).
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -44,6 +45,9 @@ from riskmap.sim.record import EpisodeRecord
 from riskmap.sim.rollout import LoopConfig, drive_world
 
 
+GOALS = ("route", "human")
+
+
 @dataclass(frozen=True)
 class ReplayConfig:
     control_hz: int = 10
@@ -51,10 +55,14 @@ class ReplayConfig:
     history_s: float = 2.0
     gap_radius_m: float = 40.0        # others farther than this do not count for the min gap
     off_road_margin_m: float = 1.0    # beyond the outer lane edge by this much = off the road
+    goal: str = "route"               # route: the route rule (what a deployed planner knows);
+                                      # human: the recorded vehicle's own end (the paper's Table I)
 
     def __post_init__(self) -> None:
         if self.control_hz % self.replan_hz:
             raise InputError("control_hz must be a multiple of replan_hz")
+        if self.goal not in GOALS:
+            raise InputError(f"--goal {self.goal!r} is unknown; use one of {', '.join(GOALS)}")
 
 
 def road_from_lanelets(network):
@@ -162,6 +170,8 @@ class CommonRoadWorld:
         self.crashed = self.off_network = False
         self.collision: dict | None = None
         self._gaps: dict[float, list] = {}        # radius -> this step's (gap, agent, xy) near
+        end, _ = traffic.resample(np.array([ego]), np.array([traffic.span(ego)[1] * traffic.dt_s]))
+        self.human_end_xy = end[0, 0, :2]          # where the recorded vehicle's record ends
 
     def _span(self, start_s: float | None, duration_s: float | None) -> tuple[float, int]:
         first, last = self.traffic.span(self.ego_index)
@@ -198,9 +208,17 @@ class CommonRoadWorld:
         return self.vehicle, self.scene(history_s)
 
     def scene(self, history_s: float) -> Scene:
-        """The planner's scene now; its history is `scene_config`'s, as for collected windows."""
-        return _ego_scene(self.traffic, self.ego_index, self.track_t, self.track, self.time_s,
-                          self.lanes, self.scene_config)
+        """The planner's scene now; its history is `scene_config`'s, as for collected windows.
+
+        With `config.goal == "human"` the route is the straight line from the ego to where the
+        recorded vehicle's record ends, so the route rule's goal (the last route point inside the
+        grid) is the human's end position, or the grid edge towards it."""
+        scene = _ego_scene(self.traffic, self.ego_index, self.track_t, self.track, self.time_s,
+                           self.lanes, self.scene_config)
+        if self.config.goal == "human":
+            line = np.linspace(self.track[-1][:2], self.human_end_xy, 200)
+            scene = dataclasses.replace(scene, route_xy=line)
+        return scene
 
     def ego_state(self) -> np.ndarray:
         return self.track[-1]

@@ -56,3 +56,10 @@ def test_workers_give_the_same_records_and_bad_input_leaves_nothing(tmp_path):
     with pytest.raises(InputError, match="unknown planner spec"):
         evaluate_commonroad([FIXTURES], ("replay", "nope:x"), never, progress=False)
     assert not never.exists()
+
+
+def test_goal_is_for_recordings_only(tmp_path, capsys):
+    assert main(["evaluate", "--planners", "cv", "--env", "highway-v0", "--episodes", "1", "--goal",
+                 "human", "--out", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "--goal is for recordings" in err and "\n" not in err and not (tmp_path / "x").exists()
