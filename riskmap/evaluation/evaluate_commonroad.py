@@ -115,8 +115,9 @@ def evaluate_commonroad(recordings: list[str | Path], planners: tuple[str, ...],
                         workers: int = 1, goal: str = "route") -> dict:
     """Run every planner on every recorded demonstrator (episodes on `workers` processes) towards
     `goal` (riskmap.sim.commonroad_replay.ReplayConfig: route or human); returns {planner: summary}."""
-    from riskmap.sim.commonroad_replay import ReplayConfig
     from tqdm import tqdm
+
+    from riskmap.sim.commonroad_replay import ReplayConfig
 
     out = Path(out)
     ReplayConfig(goal=goal)           # validates the goal before any work

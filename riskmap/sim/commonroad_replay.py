@@ -44,7 +44,6 @@ from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, Plan
 from riskmap.sim.record import EpisodeRecord
 from riskmap.sim.rollout import LoopConfig, drive_world
 
-
 GOALS = ("route", "human")
 
 
