@@ -33,12 +33,11 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     if args.commonroad:
         from riskmap.evaluation.evaluate_commonroad import evaluate_commonroad
 
-        if args.mode != "log" or args.env or args.episodes:
-            raise InputError("--commonroad evaluates recorded vehicles in log mode: drop --env, "
-                             "--episodes and --mode reactive")
+        if args.env or args.episodes:
+            raise InputError("--commonroad evaluates recorded vehicles: drop --env and --episodes")
         evaluate_commonroad(args.commonroad, planners, Path(args.out), seed=args.seed,
                             resume=args.resume, progress=not args.quiet, workers=args.workers,
-                            goal=args.goal or "route")
+                            goal=args.goal or "route", mode=args.mode)
         print((Path(args.out) / "table.md").read_text(), end="")
         return 0
     if args.goal is not None:
@@ -96,10 +95,12 @@ def add_parsers(sub) -> None:
                    help="with --commonroad: the route rule's goal (default) or the recorded "
                         "vehicle's own end position (the planner paper's protocol)")
     p.add_argument("--commonroad", nargs="+", metavar="DIR_OR_FILE",
-                   help="evaluate on recorded vehicles of CommonRoad files instead (log mode)")
+                   help="evaluate on recorded vehicles of CommonRoad files instead (--mode log or "
+                        "reactive)")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--mode", choices=("log", "reactive"), default="log",
-                   help="log: other vehicles replay the human's record; reactive: IDM/MOBIL traffic")
+                   help="log: other vehicles replay the human's record; reactive: IDM/MOBIL traffic "
+                        "(with --commonroad: the recorded paths, braking for the ego)")
     p.add_argument("--episode-s", type=float, default=None,
                    help="simulated seconds per episode (default: the family's length)")
     p.add_argument("--out", required=True)

@@ -1,9 +1,10 @@
-"""`riskmap evaluate --mode log --commonroad DIR`: planners drive recorded human vehicles.
+"""`riskmap evaluate --commonroad DIR [--mode log|reactive]`: planners drive recorded human vehicles.
 
 Every vehicle that `riskmap collect --from-commonroad` makes a demonstrator (2 s of history and
 6 s of future in its record) is one episode: it is handed over to the planner 2 s into its
 record and driven to the end of it, among the other recorded vehicles replaying their tracks
-(`riskmap.sim.commonroad_replay`, a highway-env road built from the lanelets). Per planner and
+(`riskmap.sim.commonroad_replay`, a highway-env road built from the lanelets): by time in `log`
+mode, along their paths braking for the ego in `reactive` mode. Per planner and
 episode OUT/episodes/<planner>/<scenario>_<vehicle>.json (atomic; `--resume` skips finished
 ones), then OUT/results.json and OUT/table.md with means and 90th percentiles.
 
@@ -68,10 +69,10 @@ def _run_episode(task: tuple) -> dict:
     from riskmap.sim.commonroad_replay import ReplayConfig, replay_commonroad_episode
 
     torch.set_num_threads(1)          # workers run side by side
-    spec, path, vehicle, seed, goal, out = task
+    spec, path, vehicle, seed, goal, mode, out = task
     traffic = _traffic(path)
     result = replay_commonroad_episode(traffic, vehicle, _planner(spec, traffic, vehicle, seed),
-                                       config=ReplayConfig(goal=goal))
+                                       config=ReplayConfig(goal=goal, mode=mode))
     write_json(_episode_path(out, spec, traffic.name, vehicle), result)
     return result
 
@@ -86,8 +87,8 @@ def summarise(records: list[dict]) -> dict:
             "safe_episodes_pct": 100.0 * float(np.mean([not (r["collided"] or r["off_road"])
                                                         for r in records])),
             "collision_rate": float(np.mean([r["collided"] for r in records])),
-            # A replayed vehicle cannot see the ego: hit from behind is the replay's doing, driving
-            # into a vehicle ahead the planner's (at fault).
+            # A log-replayed vehicle cannot see the ego: hit from behind is the replay's doing,
+            # driving into a vehicle ahead the planner's (at fault).
             "at_fault": int(sum(bool(r["collision"]) and r["collision"]["other_ahead"] for r in records)),
             "struck_from_behind": int(sum(bool(r["collision"]) and not r["collision"]["other_ahead"]
                                           for r in records)),
@@ -112,15 +113,16 @@ def markdown_table(results: dict) -> str:
 
 def evaluate_commonroad(recordings: list[str | Path], planners: tuple[str, ...], out: Path,
                         seed: int = 0, resume: bool = False, progress: bool = True,
-                        workers: int = 1, goal: str = "route") -> dict:
+                        workers: int = 1, goal: str = "route", mode: str = "log") -> dict:
     """Run every planner on every recorded demonstrator (episodes on `workers` processes) towards
-    `goal` (riskmap.sim.commonroad_replay.ReplayConfig: route or human); returns {planner: summary}."""
+    `goal` among others replayed in `mode` (riskmap.sim.commonroad_replay.ReplayConfig: route or
+    human; log or reactive); returns {planner: summary}."""
     from tqdm import tqdm
 
     from riskmap.sim.commonroad_replay import ReplayConfig
 
     out = Path(out)
-    ReplayConfig(goal=goal)           # validates the goal before any work
+    ReplayConfig(goal=goal, mode=mode)    # validates the goal and mode before any work
     files = scenario_files(recordings)
     config = CommonRoadCollectConfig(files=())
     episodes = []
@@ -134,10 +136,11 @@ def evaluate_commonroad(recordings: list[str | Path], planners: tuple[str, ...],
     for spec in planners:           # a bad SPEC fails here, before anything is written
         if spec != "replay":
             _planner(spec, None, 0, seed)
-    meta = {"recordings": [str(p) for p in files], "planners": list(planners), "seed": seed, "goal": goal}
+    meta = {"recordings": [str(p) for p in files], "planners": list(planners), "seed": seed, "goal": goal,
+            "mode": mode}
     claim_out_dir(out, holds="an evaluation", marker="run.json", resume=resume, settings_file="run.json",
                   settings=meta)
-    todo = [(spec, path, vehicle, seed, goal, out) for spec in planners for path, name, vehicle in episodes
+    todo = [(spec, path, vehicle, seed, goal, mode, out) for spec in planners for path, name, vehicle in episodes
             if not (resume and _episode_path(out, spec, name, vehicle).exists())]
     bar = tqdm(total=len(todo), disable=not progress, desc="evaluate recordings")
     for _ in run_parallel(_run_episode, todo, workers):

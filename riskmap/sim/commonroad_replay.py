@@ -2,8 +2,10 @@
 
 The road is a highway-env `RoadNetwork` of `PolyLane`s built from the lanelets (centre line and
 both bounds, in highway-env's y-down frame), so the ego moves with highway-env's bicycle model
-and the same tracking controller as `riskmap drive`. Every other vehicle replays its recording
-(it does not react to the ego); collisions are box overlaps against the recorded boxes.
+and the same tracking controller as `riskmap drive`. Every other vehicle follows its recording:
+in `log` mode by time (it does not react to the ego), in `reactive` mode along its recorded path
+with its own progress, braking for an ego in its way (`ReactiveTraffic`); collisions are box
+overlaps against the others' boxes.
 
 At `start_s` the recorded vehicle is handed over to the planner, which replans at `replan_hz`
 from a 2 s history (the human's own before the hand-over, its closed-loop states after) and the
@@ -41,10 +43,12 @@ from rasterize.scene import STATE_DIM, Scene
 from riskmap.sim.control import planned_vehicle_class
 from riskmap.sim.metrics import SafetyConfig, centre_off_lane, dangerous_encounters, safety_pct
 from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, Plan
+from riskmap.sim.reactive_traffic import ReactiveTraffic
 from riskmap.sim.record import EpisodeRecord
 from riskmap.sim.rollout import LoopConfig, drive_world
 
 GOALS = ("route", "human")
+MODES = ("log", "reactive")
 
 
 @dataclass(frozen=True)
@@ -56,12 +60,16 @@ class ReplayConfig:
     off_road_margin_m: float = 1.0    # beyond the outer lane edge by this much = off the road
     goal: str = "route"               # route: the route rule (what a deployed planner knows);
                                       # human: the recorded vehicle's own end (the paper's Table I)
+    mode: str = "log"                 # log: the others replay their tracks by time; reactive: they
+                                      # keep their paths but brake for the ego (`ReactiveTraffic`)
 
     def __post_init__(self) -> None:
         if self.control_hz % self.replan_hz:
             raise InputError("control_hz must be a multiple of replan_hz")
         if self.goal not in GOALS:
             raise InputError(f"--goal {self.goal!r} is unknown; use one of {', '.join(GOALS)}")
+        if self.mode not in MODES:
+            raise InputError(f"--mode {self.mode!r} is unknown; use one of {', '.join(MODES)}")
 
 
 def road_from_lanelets(network):
@@ -110,16 +118,17 @@ class RecordedFuturePlanner:
 
 
 def _ego_scene(traffic: RecordedTraffic, ego: int, track_t: list[float], track: list[np.ndarray],
-               now_s: float, lanes, config: CommonRoadSceneConfig) -> Scene:
-    """The scene the planner sees now: the ego's track (no future) and the recorded others."""
+               now_s: float, lanes, config: CommonRoadSceneConfig, others_at) -> Scene:
+    """The scene the planner sees now: the ego's track (no future) and the others' states so far
+    (`others_at(agents, times)`: the world's `CommonRoadWorld.others_at`)."""
     ego_state = track[-1]
     others = [a for a in range(len(traffic.ids)) if a != ego]
-    present_states, present = traffic.resample(np.array(others, dtype=np.int64), np.array([now_s]))
+    present_states, present = others_at(np.array(others, dtype=np.int64), np.array([now_s]))
     dist = np.linalg.norm(present_states[:, 0, :2] - ego_state[:2], axis=1)
     order = [others[i] for i in np.argsort(dist, kind="stable")
              if present[i, 0] and dist[i] <= config.radius_m][: config.max_agents - 1]
     times = now_s + config.dt_s * np.arange(-config.history_steps, 1)
-    states, valid = traffic.resample(np.array(order, dtype=np.int64), times)
+    states, valid = others_at(np.array(order, dtype=np.int64), times)
     t_arr, s_arr = np.asarray(track_t), np.asarray(track)
     angle = np.unwrap(np.arctan2(s_arr[:, 3], s_arr[:, 2]))
     mine_valid = (times >= t_arr[0] - 1e-9) & (times <= t_arr[-1] + 1e-9)
@@ -144,7 +153,8 @@ class CommonRoadWorld:
 
     The ego's track (`track_t` s, `track` [6] world states) is the recorded history up to the
     hand-over, then the closed loop; `driven()` is the closed-loop part. `n_steps`: steps to the
-    end of the recording (or of `duration_s`). `collision` names the vehicle that was hit.
+    end of the recording (or of `duration_s`). `collision` names the vehicle that was hit. Where
+    the others are is `others_at`, whatever the mode; everything here reads them from it.
     """
 
     def __init__(self, traffic: RecordedTraffic, ego_id: int, start_s: float | None = None,
@@ -165,6 +175,8 @@ class CommonRoadWorld:
         self.lanes = lanes_from_lanelets(traffic.scenario.lanelet_network)
         self.vehicle = self._planned_vehicle(self.track[-1])
         self.others = np.array([a for a in range(len(traffic.ids)) if a != ego], dtype=np.int64)
+        self.reactive = (ReactiveTraffic(traffic, self.others, ego, self.start, self.dt)
+                         if config.mode == "reactive" else None)
         self.steps = 0
         self.crashed = self.off_network = False
         self.collision: dict | None = None
@@ -213,7 +225,7 @@ class CommonRoadWorld:
         recorded vehicle's record ends, so the route rule's goal (the last route point inside the
         grid) is the human's end position, or the grid edge towards it."""
         scene = _ego_scene(self.traffic, self.ego_index, self.track_t, self.track, self.time_s,
-                           self.lanes, self.scene_config)
+                           self.lanes, self.scene_config, self.others_at)
         if self.config.goal == "human":
             line = np.linspace(self.track[-1][:2], self.human_end_xy, 200)
             scene = dataclasses.replace(scene, route_xy=line)
@@ -222,41 +234,57 @@ class CommonRoadWorld:
     def ego_state(self) -> np.ndarray:
         return self.track[-1]
 
+    def others_at(self, agents: np.ndarray, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """States [len(agents), len(times_s), 6] and presence of other vehicles (indices into
+        `traffic`) at times up to now: their recording in log mode, where they drove in reactive
+        mode (at the world's steps, or before the hand-over)."""
+        if self.reactive is None:
+            return self.traffic.resample(agents, times_s)
+        return self.reactive.states_at(agents, times_s)
+
     def driven(self) -> tuple[np.ndarray, np.ndarray]:
         """Times [S] and world states [S, 6] of the closed-loop steps."""
         return (np.asarray(self.track_t[self.history_len:]),
                 np.asarray(self.track[self.history_len:]).reshape(-1, STATE_DIM))
 
     def step(self) -> None:
-        prev = self.track[-1]
-        self.road.act()
-        self.road.step(self.dt)
+        if self.reactive is not None:          # the others react to where the ego is now
+            self.reactive.step(self.track[-1])
+        state = self._move_ego()
         self.steps += 1
-        xy = world_from_highway_env(self.vehicle.position)
-        heading = float(heading_from_highway_env(self.vehicle.heading))
-        prev_heading = float(np.arctan2(prev[3], prev[2]))
-        yaw_rate = ((heading - prev_heading + np.pi) % (2 * np.pi) - np.pi) / self.dt
         self.track_t.append(self.time_s)
-        self.track.append(np.array([xy[0], xy[1], np.cos(heading), np.sin(heading),
-                                    float(self.vehicle.speed), yaw_rate]))
+        self.track.append(state)
+        xy, heading = state[:2], float(np.arctan2(state[3], state[2]))
         self._gaps = {}
         near = self._near(self.config.gap_radius_m)
         if near and min(gap for gap, _, _ in near) <= 0.0:
             self.crashed = True
             _, agent, other_xy = near[int(np.argmin([gap for gap, _, _ in near]))]
-            # Replayed traffic does not react: a vehicle behind may run into an ego that drives
-            # slower than the human did. Say which it was.
+            # Log-replayed traffic does not react: a vehicle behind may run into an ego that
+            # drives slower than the human did. Say which it was.
             self.collision = {"other_id": int(self.traffic.ids[agent]), "other_ahead": bool(
                 ego_from_world(other_xy, xy, heading)[0] > 0)}
             return
         if centre_off_lane(self.road, self.vehicle, self.config.off_road_margin_m):
             self.off_network = True
 
+    def _move_ego(self) -> np.ndarray:
+        """One `dt` of the highway-env ego; its world state [6] afterwards."""
+        prev = self.track[-1]
+        self.road.act()
+        self.road.step(self.dt)
+        xy = world_from_highway_env(self.vehicle.position)
+        heading = float(heading_from_highway_env(self.vehicle.heading))
+        prev_heading = float(np.arctan2(prev[3], prev[2]))
+        yaw_rate = ((heading - prev_heading + np.pi) % (2 * np.pi) - np.pi) / self.dt
+        return np.array([xy[0], xy[1], np.cos(heading), np.sin(heading),
+                         float(self.vehicle.speed), yaw_rate])
+
     def _near(self, radius_m: float) -> list[tuple[float, int, np.ndarray]]:
-        """(box gap, agent, position) of every recorded vehicle present within `radius_m` now."""
+        """(box gap, agent, position) of every other vehicle present within `radius_m` now."""
         if radius_m not in self._gaps:
             me_state, traffic = self.track[-1], self.traffic
-            rec, present = traffic.resample(self.others, np.array([self.time_s]))
+            rec, present = self.others_at(self.others, np.array([self.time_s]))
             me = box_corners(me_state[:2], me_state[2:4], *traffic.sizes[self.ego_index])
             self._gaps[radius_m] = [
                 (box_gap(me, box_corners(rec[i, 0, :2], rec[i, 0, 2:4], *traffic.sizes[a])), a,
@@ -278,7 +306,7 @@ def _human_metrics(world: CommonRoadWorld) -> dict:
               for mine, recorded in zip(driven[:, :2], human[0, :, :2])]
     # Safety % as on simulated scenes (riskmap.sim.metrics): every driven step, every other recorded
     # vehicle within the encounter radius is an encounter, dangerous when close or about to touch.
-    other_states, other_present = traffic.resample(world.others, driven_t)
+    other_states, other_present = world.others_at(world.others, driven_t)
     dangerous, encounters = dangerous_encounters(driven, np.asarray(traffic.sizes[ego]), other_states,
                                                  other_present, np.asarray(traffic.sizes)[world.others],
                                                  SafetyConfig())

@@ -63,3 +63,15 @@ def test_goal_is_for_recordings_only(tmp_path, capsys):
                  "human", "--out", str(tmp_path / "x")]) == 2
     err = capsys.readouterr().err.strip()
     assert "--goal is for recordings" in err and "\n" not in err and not (tmp_path / "x").exists()
+
+
+def test_cli_runs_recordings_in_reactive_mode(tmp_path, capsys):
+    out = tmp_path / "reactive"
+    assert main(["evaluate", "--commonroad", str(FIXTURES / "USA_US101-4_1_T-1.xml"), "--planners",
+                 "cv", "--mode", "reactive", "--quiet", "--out", str(out)]) == 0
+    assert "| cv |" in capsys.readouterr().out
+    assert json.loads((out / "run.json").read_text())["mode"] == "reactive"
+    assert json.loads((out / "results.json").read_text())["mode"] == "reactive"
+    with pytest.raises(InputError, match="--mode 'x'"):
+        evaluate_commonroad([FIXTURES], ("cv",), tmp_path / "x", progress=False, mode="x")
+    assert not (tmp_path / "x").exists()

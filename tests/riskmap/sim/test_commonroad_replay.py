@@ -16,6 +16,7 @@ from riskmap.planner.baselines import ConstantVelocityPlanner
 from riskmap.sim.commonroad_replay import (
     CommonRoadWorld,
     RecordedFuturePlanner,
+    ReplayConfig,
     replay_commonroad_episode,
     road_from_lanelets,
 )
@@ -136,3 +137,67 @@ def test_the_human_goal_is_the_recorded_vehicles_own_end(traffic):
     assert not np.allclose(route.route_xy[-1], world.human_end_xy)   # the route rule's goal differs
     with pytest.raises(InputError, match="--goal 'nope'"):
         ReplayConfig(goal="nope")
+
+
+class _HumanEgoWorld(CommonRoadWorld):
+    """The ego is put exactly where the recorded human was at every step."""
+
+    def _move_ego(self) -> np.ndarray:
+        state, _ = self.traffic.resample(np.array([self.ego_index]), np.array([self.time_s + self.dt]))
+        return state[0, 0]
+
+
+@pytest.mark.parametrize("vehicle", [442, 468, 475])
+def test_reactive_traffic_reproduces_the_recording_when_the_ego_is_the_human(traffic, vehicle):
+    # 442 and 468 have followers closer than IDM's desired gap in the recording: they must not
+    # brake for an ego that is where the human was.
+    world = _HumanEgoWorld(traffic, vehicle, config=ReplayConfig(mode="reactive"))
+    times = [world.time_s]
+    for _ in range(world.n_steps):
+        world.step()
+        times.append(world.time_s)
+    assert not world.crashed
+    times = np.array(times)
+    reactive, present = world.others_at(world.others, times)
+    recorded, recorded_present = traffic.resample(world.others, times)
+    assert present.any() and (present == recorded_present).all()
+    np.testing.assert_allclose(reactive[present][:, :2], recorded[present][:, :2], rtol=0, atol=1e-6)
+    # The planner's scene (history included) holds the recorded others too.
+    scene = world.scene(2.0)
+    log_scene = CommonRoadWorld(traffic, vehicle)
+    log_scene.track_t, log_scene.track, log_scene.steps = world.track_t, world.track, world.steps
+    np.testing.assert_allclose(scene.states, log_scene.scene(2.0).states, rtol=0, atol=1e-6)
+
+
+@pytest.mark.parametrize("planner", ["cv", "replay"])
+def test_reactive_traffic_with_a_planner_that_keeps_up_behaves_as_the_log(traffic, planner):
+    for vehicle in (475, 468):
+        make = lambda: (ConstantVelocityPlanner() if planner == "cv"  # noqa: E731
+                        else RecordedFuturePlanner(traffic, vehicle))
+        log = replay_commonroad_episode(traffic, vehicle, make())
+        reactive = replay_commonroad_episode(traffic, vehicle, make(),
+                                             config=ReplayConfig(mode="reactive"))
+        for key in ("collided", "collision", "min_gap_m", "ade_m", "safety_pct", "simulated_s"):
+            assert reactive[key] == pytest.approx(log[key]), key
+
+
+def test_reactive_traffic_brakes_for_a_stopped_ego(traffic):
+    # In log mode the replayed 475 runs into 468 stopped ahead of it; reactive, it stops behind.
+    log = replay_commonroad_episode(traffic, 468, _StopPlanner())
+    assert log["collision"] == {"other_id": 475, "other_ahead": False}
+    world = CommonRoadWorld(traffic, 468, config=ReplayConfig(mode="reactive"))
+    loop = drive_world(world, _StopPlanner(), LoopConfig(world.n_steps, 5))
+    assert not world.crashed and world.collision is None and world.steps == world.n_steps
+    assert min(loop.gaps) >= 0.0
+    follower = np.array([traffic.index_of(475)])
+    driven, recorded = world.others_at(follower, np.array([world.time_s]))[0], traffic.resample(
+        follower, np.array([world.time_s]))[0]
+    assert np.linalg.norm(driven[0, 0, :2] - recorded[0, 0, :2]) > 5.0   # it fell behind its log
+    assert driven[0, 0, 4] < 0.5 and world.ego.speed < 0.5              # both came to a stop
+    result = replay_commonroad_episode(traffic, 468, _StopPlanner(), config=ReplayConfig(mode="reactive"))
+    assert not result["collided"] and result["min_gap_m"] >= 0.0
+
+
+def test_an_unknown_mode_is_an_input_error():
+    with pytest.raises(InputError, match="--mode 'x'"):
+        ReplayConfig(mode="x")
