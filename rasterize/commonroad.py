@@ -180,6 +180,50 @@ def _recorded_states(obstacle) -> list:
     return sorted(states, key=lambda s: int(s.time_step))
 
 
+MAX_SPEED_MPS = 70.0     # a recorded step implying more than this is a jump, not driving
+
+
+def _track_problem(record: list, dt_s: float) -> str:
+    """Why a recorded track cannot be used ("" when it can): non-finite values or a jump."""
+    steps = np.array([int(st.time_step) for st in record])
+    xy = np.array([np.asarray(st.position, dtype=np.float64).reshape(-1)[:2] for st in record])
+    for name in ("orientation", "velocity"):
+        values = [getattr(st, name, None) for st in record]
+        if any(v is not None and not np.isfinite(float(v)) for v in values):
+            return f"non-finite {name}"
+    if not np.isfinite(xy).all():
+        return "non-finite position"
+    if len(steps) > 1:
+        speed = np.linalg.norm(np.diff(xy, axis=0), axis=1) / (np.diff(steps) * dt_s)
+        if speed.max() > MAX_SPEED_MPS:
+            return f"jump of {speed.max() * dt_s:.1f} m in one step"
+    return ""
+
+
+def smooth_track(states: np.ndarray, dt_s: float, window_s: float) -> np.ndarray:
+    """[S, 6] states of one track with positions, heading and speed smoothed (class doc).
+
+    Quadratic Savitzky-Golay over the odd number of steps closest to `window_s` (at most the
+    track's length); the yaw rate is recomputed from the smoothed heading as a backward
+    difference. Tracks shorter than 5 steps are returned unchanged.
+    """
+    from scipy.signal import savgol_filter
+
+    n = len(states)
+    window = min(int(round(window_s / dt_s)) | 1, n if n % 2 else n - 1)
+    if window < 5:
+        return states
+    out = states.copy()
+    out[:, :2] = savgol_filter(states[:, :2], window, 2, axis=0, mode="interp")
+    heading = savgol_filter(np.unwrap(np.arctan2(states[:, 3], states[:, 2])), window, 2,
+                            mode="interp")
+    velocity = savgol_filter(states[:, :2], window, 2, deriv=1, delta=dt_s, axis=0, mode="interp")
+    out[:, 2], out[:, 3] = np.cos(heading), np.sin(heading)
+    out[:, 4] = np.linalg.norm(velocity, axis=1)
+    out[:, 5] = np.concatenate([[states[0, 5]], np.diff(heading) / dt_s])
+    return out
+
+
 class RecordedTraffic:
     """Every dynamic obstacle of a scenario on the file's time grid.
 
@@ -189,13 +233,29 @@ class RecordedTraffic:
     The yaw rate is the backward difference of the recorded heading (0 at a vehicle's first
     step), as the simulator's recorder computes it; a speed missing from the file is the
     displacement rate.
+
+    `smoothing_s` > 0 smooths every track (NGSIM positions jump by decimetres between steps,
+    which reads as 7 m/s² accelerations at the 99th percentile): positions and the unwrapped
+    heading by a Savitzky-Golay filter (quadratic) over that many seconds, the speed as the
+    same filter's derivative of the positions, so speed and displacement agree.
+    A vehicle whose record is not finite or jumps (a step implying more than `MAX_SPEED_MPS`)
+    cannot be placed: it is left out of the arrays and its id listed in `rejected` with why.
     """
 
-    def __init__(self, scenario, name: str = ""):
+    def __init__(self, scenario, name: str = "", smoothing_s: float = 0.0):
         self.scenario, self.name = scenario, name or str(getattr(scenario, "scenario_id", ""))
         self.dt_s = float(scenario.dt)
-        obstacles = sorted(scenario.dynamic_obstacles, key=lambda o: o.obstacle_id)
-        records = [_recorded_states(o) for o in obstacles]
+        self.smoothing_s = float(smoothing_s)
+        self.rejected: dict[int, str] = {}
+        obstacles, records = [], []
+        for obstacle in sorted(scenario.dynamic_obstacles, key=lambda o: o.obstacle_id):
+            record = _recorded_states(obstacle)
+            problem = _track_problem(record, self.dt_s)
+            if problem:
+                self.rejected[int(obstacle.obstacle_id)] = problem
+            else:
+                obstacles.append(obstacle)
+                records.append(record)
         last = max((int(r[-1].time_step) for r in records), default=0)
         n, s = len(obstacles), last + 1
         self.states = np.zeros((n, s, STATE_DIM))
@@ -227,6 +287,10 @@ class RecordedTraffic:
             if gaps.size:
                 for k in range(STATE_DIM):
                     self.states[a, gaps, k] = np.interp(gaps, steps, self.states[a, steps, k])
+            if self.smoothing_s > 0:
+                first, last = steps[0], steps[-1] + 1
+                self.states[a, first:last] = smooth_track(self.states[a, first:last], self.dt_s,
+                                                          self.smoothing_s)
 
     @property
     def num_steps(self) -> int:

@@ -156,10 +156,13 @@ def _check_out_dir(out: Path, config: CollectConfig, resume: bool) -> None:
 
 
 def write_index_and_manifest(out: Path, config: CollectConfig, infos: list[dict],
-                             elapsed_s: float) -> dict:
+                             elapsed_s: float, extra: dict | None = None) -> dict:
+    """Write the index of shards and the manifest (config, provenance, counts, and `extra`)."""
     infos = sorted(infos, key=lambda i: i["episode"])
+    # A shard's group (recorded data: site and configuration) lets training split by group.
     index = {"shards": [{"file": f"{SHARD_DIR}/{shard_path(out, i['episode']).name}",
-                         "episode": i["episode"], "windows": i["windows"]} for i in infos]}
+                         "episode": i["episode"], "windows": i["windows"],
+                         **({"group": i["group"]} if "group" in i else {})} for i in infos]}
     manifest = {
         "config": config.to_dict(),
         "seed": config.seed,
@@ -172,6 +175,7 @@ def write_index_and_manifest(out: Path, config: CollectConfig, infos: list[dict]
             "simulated_s": float(sum(i["simulated_s"] for i in infos)),
         },
         "last_run_elapsed_s": round(elapsed_s, 3),
+        **(extra or {}),
     }
     write_json(out / INDEX, index)
     write_json(out / MANIFEST, manifest)

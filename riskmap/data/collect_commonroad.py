@@ -1,26 +1,54 @@
 """Demonstrations from recorded traffic: every recorded vehicle of CommonRoad files is a demonstrator.
 
-For each scenario file (in sorted path order) and each vehicle in it (in increasing obstacle id)
-that has its full history and future recorded at least once, the windows it drives are cut as
-for simulated data (2 s history and 6 s future at 2 Hz, one every second) and written as one
-shard: one "episode" is one demonstrator, so `riskmap train`, which holds out the last episodes,
-holds out whole vehicles. Same shard format, index and manifest as `riskmap collect`; `--resume`
-keeps the shards already written.
+Recordings of one site come as several files per traffic configuration (NGSIM in CommonRoad:
+`USA_US101-10_1_T-1.xml`, `USA_US101-10_3_T-1.xml`, ... are the same moment of traffic, each
+with another vehicle taken out as its planning problem), so the same recorded vehicle appears
+in several files. Here:
+
+- Files are read in sorted path order; tracks are smoothed (`RecordedTraffic(smoothing_s=...)`)
+  and a track already seen in an earlier file (same obstacle id, length and speed profile:
+  `track_fingerprint`) is skipped and counted, so every recorded vehicle is one demonstrator
+  once. Tracks that are not finite or jump are left out by `RecordedTraffic` and counted.
+- A demonstrator's windows (2 s history, 6 s future at 2 Hz) start at every step its record
+  allows, one per second (`window_stride_s`).
+- Each demonstrator is one shard ("episode") whose info names its `group` (the site and
+  configuration number, `recording_group`), so `riskmap train` holds out whole configurations.
+- With `derive=True` (the default) the settings tuned to highway-env come from the recordings
+  instead (`derive_settings`): the raster extent from how far the demonstrators drive in 6 s,
+  the route rule's speed limit from the speeds driven, its acceleration as the one whose goal
+  lands closest to where the humans were after 6 s; the spread of that goal error (metres,
+  along and across the heading) is stored for the trainer's goal variance. All in the manifest.
+
+A directory mixing sites is refused (extents and speeds differ; collect each site on its own).
+Same shard format, index and manifest as `riskmap collect`; `--resume` keeps the shards already
+written.
 """
 
 from __future__ import annotations
 
 import hashlib
+import math
+import re
 import shutil
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
-from rasterize.commonroad import CommonRoadSceneConfig, RecordedTraffic, load_scenario
-from rasterize.config import FAMILY_EXTENTS, RasterConfig
+import numpy as np
+
+from rasterize.commonroad import (
+    CommonRoadSceneConfig,
+    RecordedTraffic,
+    load_scenario,
+    route_on_lanelets,
+)
+from rasterize.config import FAMILY_EXTENTS, Extent, RasterConfig
 from rasterize.errors import InputError
+from rasterize.frames import ego_from_world
+from rasterize.highway import RouteRule
 from riskmap.data.collect import (
     FORMAT_VERSION,
+    MANIFEST,
     SHARD_DIR,
     _check_out_dir,
     read_episode_info,
@@ -30,6 +58,9 @@ from riskmap.data.collect import (
 )
 
 SOURCE = "commonroad"
+# NGSIM in CommonRoad: <country>_<site>-<configuration>_<variant>_<T|S>-<version>
+RECORDING_NAME = re.compile(r"^(?P<site>.+?)-(?P<configuration>\d+)_(?P<variant>\d+)_[TS]-\d+$")
+ROUTE_ACCELS_MPS2 = tuple(np.round(np.arange(0.0, 2.01, 0.25), 2))   # candidates for derive
 
 
 @dataclass(frozen=True)
@@ -38,7 +69,8 @@ class CommonRoadCollectConfig:
 
     `files`: (file name, sha256) of every scenario, in collection order, so that `--resume`
     refuses a directory built from other recordings. `seed` is stored for the manifest only:
-    nothing here is random.
+    nothing here is random. `raster`, `speed_limit_mps` and `route_accel_mps2` are the derived
+    values when `derive` is on (filled in by `collect_commonroad` before anything is written).
     """
 
     files: tuple[tuple[str, str], ...]
@@ -48,8 +80,11 @@ class CommonRoadCollectConfig:
     window_stride_s: float = 1.0
     scene_radius_m: float = 120.0
     max_agents: int = 32
+    smoothing_s: float = 1.5           # Savitzky-Golay window on the recorded tracks (0: raw)
     speed_limit_mps: float = 29.06     # route rule's limit when a file gives none (65 mph)
-    family: str = "highway"            # raster extent family (recorded highway traffic)
+    route_accel_mps2: float = 1.0      # route rule's acceleration (rasterize.highway.RouteRule)
+    derive: bool = True                # extent, speed limit and route acceleration from the data
+    family: str = "highway"            # raster extent family when not derived
     raster: RasterConfig | None = None
     seed: int = 0
 
@@ -57,6 +92,8 @@ class CommonRoadCollectConfig:
         if self.family not in FAMILY_EXTENTS:
             raise InputError(f"family {self.family!r} unknown; choose one of "
                              f"{', '.join(sorted(FAMILY_EXTENTS))}")
+        if not self.smoothing_s >= 0:
+            raise InputError(f"smoothing_s must be >= 0 seconds, got {self.smoothing_s}")
         if self.raster is None:
             object.__setattr__(self, "raster", RasterConfig(FAMILY_EXTENTS[self.family]))
         object.__setattr__(self, "files", tuple(tuple(f) for f in self.files))
@@ -69,7 +106,8 @@ class CommonRoadCollectConfig:
     def scene(self) -> CommonRoadSceneConfig:
         return CommonRoadSceneConfig(self.history_s, self.future_s, self.window_dt_s,
                                      self.scene_radius_m, self.max_agents,
-                                     speed_limit_mps=self.speed_limit_mps)
+                                     speed_limit_mps=self.speed_limit_mps,
+                                     route_rule=RouteRule(accel_mps2=self.route_accel_mps2))
 
     def to_dict(self) -> dict:
         data = asdict(self)
@@ -98,8 +136,39 @@ def scenario_files(inputs: list[str | Path]) -> list[Path]:
     return sorted(found)
 
 
+def recording_group(path: Path) -> tuple[str, str]:
+    """(site, group) of a recording from its file name: `USA_US101-10_3_T-1` is site `USA_US101`,
+    group `USA_US101-10` (its traffic configuration). Other names are their own site and group."""
+    match = RECORDING_NAME.match(Path(path).stem)
+    if not match:
+        return Path(path).stem, Path(path).stem
+    return match["site"], f"{match['site']}-{match['configuration']}"
+
+
+def check_one_site(files: list[Path]) -> str:
+    """The one site all `files` record; InputError naming the sites when they are mixed."""
+    sites: dict[str, int] = {}
+    for path in files:
+        site = recording_group(path)[0]
+        sites[site] = sites.get(site, 0) + 1
+    if len(sites) > 1:
+        listed = ", ".join(f"{s} ({n} files)" for s, n in sorted(sites.items()))
+        raise InputError(f"--from-commonroad mixes recordings of several sites: {listed}; collect "
+                         "each site into its own dataset (extents and speeds differ)")
+    return next(iter(sites))
+
+
 def _sha256(path: Path) -> str:
     return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def track_fingerprint(traffic: RecordedTraffic, agent: int) -> str:
+    """What identifies a recorded track across files of one recording: obstacle id, record
+    length and speed profile (positions are re-centred per file, speeds are not)."""
+    first, last = traffic.span(agent)
+    speeds = np.round(traffic.states[agent, first: last + 1, 4], 2)
+    digest = hashlib.sha1(speeds.tobytes()).hexdigest()[:16]
+    return f"{int(traffic.ids[agent])}:{last - first + 1}:{digest}"
 
 
 def demonstrators(traffic: RecordedTraffic, config: CommonRoadCollectConfig) -> list[tuple[int, list[int]]]:
@@ -114,15 +183,123 @@ def demonstrators(traffic: RecordedTraffic, config: CommonRoadCollectConfig) -> 
     return out
 
 
+@dataclass(frozen=True)
+class Demonstrator:
+    """One recorded vehicle to learn from (or to drive in an evaluation): its file, agent index
+    in that file's traffic, the current steps of its windows and its group."""
+
+    path: Path
+    agent: int
+    steps: tuple[int, ...]
+    group: str
+
+
+def unique_demonstrators(files: list[Path], config: CommonRoadCollectConfig,
+                         progress: bool = False) -> tuple[list[Demonstrator], dict, dict]:
+    """Every recorded vehicle with a window, once (the first file that holds its track), the
+    parsed traffic per file and the counts of what was skipped."""
+    from tqdm import tqdm
+
+    traffics: dict[Path, RecordedTraffic] = {}
+    seen: set[tuple[str, str]] = set()
+    out: list[Demonstrator] = []
+    skipped = {"duplicate_tracks": 0, "rejected_tracks": 0, "files_without_windows": 0}
+    for path in tqdm(files, unit="file", disable=not progress, desc="read recordings"):
+        traffic = RecordedTraffic(load_scenario(path), path.stem, smoothing_s=config.smoothing_s)
+        traffics[path] = traffic
+        skipped["rejected_tracks"] += len(traffic.rejected)
+        group = recording_group(path)[1]
+        found = demonstrators(traffic, config)
+        skipped["files_without_windows"] += not found
+        for agent, steps in found:
+            key = (group, track_fingerprint(traffic, agent))
+            if key in seen:
+                skipped["duplicate_tracks"] += 1
+                continue
+            seen.add(key)
+            out.append(Demonstrator(path, agent, tuple(steps), group))
+    return out, traffics, skipped
+
+
+def derived_extent(forward_m: np.ndarray, lateral_m: np.ndarray) -> Extent:
+    """The raster extent recorded demonstrators need: 15% beyond the farthest any drove ahead
+    in the future horizon (rounded up to 10 m), a fifth of that behind (for the traffic closing
+    in), and a lane (3.7 m) plus 2 m beyond the widest lateral excursion a side (rounded up to
+    5 m, at least 10 m)."""
+    front = 10.0 * math.ceil(1.15 * float(np.max(forward_m)) / 10.0)
+    back = 10.0 * math.ceil(0.2 * front / 10.0)
+    side = max(10.0, 5.0 * math.ceil((float(np.max(lateral_m)) + 3.7 + 2.0) / 5.0))
+    return Extent(front_m=front, back_m=back, left_m=side, right_m=side)
+
+
+def _goal_error(traffic: RecordedTraffic, agent: int, step: int, scene: CommonRoadSceneConfig,
+                present: np.ndarray) -> np.ndarray:
+    """(along, across) metres from the route rule's goal to where the human was at the end of
+    the future horizon, in the human's frame at `step`."""
+    state = traffic.states[agent, step]
+    others = [a for a in present if a != agent]
+    route = route_on_lanelets(traffic.scenario.lanelet_network, state, traffic.sizes[agent, 0],
+                              traffic.states[others, step], traffic.sizes[others, 0],
+                              scene.route_rule, scene.speed_limit_mps)
+    end = traffic.states[agent, step + round(scene.future_s / traffic.dt_s), :2]
+    heading = float(np.arctan2(state[3], state[2]))
+    return ego_from_world(end[None], state[:2], heading)[0] - ego_from_world(route[-1:], state[:2], heading)[0]
+
+
+def derive_settings(demos: list[Demonstrator], traffics: dict[Path, RecordedTraffic],
+                    config: CommonRoadCollectConfig) -> tuple[CommonRoadCollectConfig, dict]:
+    """`config` with the extent, route speed limit and route acceleration taken from the
+    recordings (module doc), and a summary of what they were derived from."""
+    future_steps = {p: round(config.future_s / t.dt_s) for p, t in traffics.items()}
+    forward, lateral, speeds = [], [], []
+    for demo in demos:
+        traffic = traffics[demo.path]
+        first, last = traffic.span(demo.agent)
+        speeds.append(traffic.states[demo.agent, first: last + 1, 4])
+        for step in demo.steps:
+            state = traffic.states[demo.agent, step]
+            future = traffic.states[demo.agent, step: step + future_steps[demo.path] + 1, :2]
+            ego = ego_from_world(future, state[:2], float(np.arctan2(state[3], state[2])))
+            forward.append(ego[:, 0].max())
+            lateral.append(np.abs(ego[:, 1]).max())
+    speeds = np.concatenate(speeds)
+    limit = 0.5 * math.ceil(2.0 * float(np.percentile(speeds, 99)))
+    extent = derived_extent(np.array(forward), np.array(lateral))
+    base = replace(config, raster=RasterConfig(extent), speed_limit_mps=limit)
+    errors = {}
+    for accel in ROUTE_ACCELS_MPS2:
+        scene = replace(base, route_accel_mps2=float(accel)).scene
+        errors[float(accel)] = float(np.mean([
+            np.linalg.norm(_goal_error(traffics[d.path], d.agent, step, scene,
+                                       np.flatnonzero(traffics[d.path].valid[:, step])))
+            for d in demos for step in d.steps]))
+    accel = min(errors, key=errors.get)
+    summary = {"windows": len(forward), "speed_p50_mps": float(np.percentile(speeds, 50)),
+               "speed_p99_mps": float(np.percentile(speeds, 99)),
+               "forward_6s_max_m": float(np.max(forward)), "lateral_max_m": float(np.max(lateral)),
+               "route_goal_error_m_by_accel": errors}
+    return replace(base, route_accel_mps2=accel), summary
+
+
 def collect_commonroad(inputs: list[str | Path], out: Path, resume: bool = False,
                        progress: bool = True, **settings) -> dict:
     """Cut demonstrator windows from CommonRoad recordings into dataset `out`; returns the manifest.
 
-    `settings` override `CommonRoadCollectConfig` fields (history_s, future_s, ...).
+    `settings` override `CommonRoadCollectConfig` fields (history_s, future_s, derive, ...).
     """
     out = Path(out)
     files = scenario_files(inputs)
+    check_one_site(files)
     config = CommonRoadCollectConfig(files=tuple((p.name, _sha256(p)) for p in files), **settings)
+    if not (out / MANIFEST).exists():
+        _check_out_dir(out, config, resume)     # a wrong --out fails before the slow reading
+    demos, traffics, skipped = unique_demonstrators(files, config, progress)
+    if not demos:
+        raise InputError(f"no recorded vehicle in {len(files)} file(s) has {config.history_s:g} s "
+                         f"of history and {config.future_s:g} s of future; use longer recordings")
+    derivation = None
+    if config.derive:
+        config, derivation = derive_settings(demos, traffics, config)
     _check_out_dir(out, config, resume)
     created = not out.exists()
     start = time.perf_counter()
@@ -130,37 +307,45 @@ def collect_commonroad(inputs: list[str | Path], out: Path, resume: bool = False
     write_index_and_manifest(out, config, [], 0.0)   # lets --resume recognise an interrupted run
     infos: list[dict] = []
     try:
-        _collect_files(files, config, out, resume, progress, infos)
-        if not infos:
-            raise InputError(f"no recorded vehicle in {len(files)} file(s) has {config.history_s:g} s "
-                             f"of history and {config.future_s:g} s of future; use longer recordings")
+        _write_shards(demos, traffics, config, out, resume, progress, infos)
     except BaseException:
         if created and not any((out / SHARD_DIR).iterdir()):
             shutil.rmtree(out, ignore_errors=True)
         raise
-    return write_index_and_manifest(out, config, infos, time.perf_counter() - start)
+    errors = np.array([e for i in infos for e in i["goal_error_m"]]).reshape(-1, 2)
+    derived = {"speed_limit_mps": config.speed_limit_mps, "route_accel_mps2": config.route_accel_mps2,
+               "extent": asdict(config.raster.extent),
+               "goal_error_rms_m": {"along": float(np.sqrt(np.mean(errors[:, 0] ** 2))),
+                                    "across": float(np.sqrt(np.mean(errors[:, 1] ** 2)))},
+               "derived_from_data": config.derive, "derivation": derivation}
+    groups = sorted({i["group"] for i in infos})
+    return write_index_and_manifest(out, config, infos, time.perf_counter() - start,
+                                    extra={"derived": derived, "skipped": skipped, "groups": groups})
 
 
-def _collect_files(files: list[Path], config: CommonRoadCollectConfig, out: Path, resume: bool,
-                   progress: bool, infos: list[dict]) -> None:
+def _write_shards(demos: list[Demonstrator], traffics: dict[Path, RecordedTraffic],
+                  config: CommonRoadCollectConfig, out: Path, resume: bool, progress: bool,
+                  infos: list[dict]) -> None:
     """Write the shard of every demonstrator not yet written; append every shard's info to `infos`."""
     from tqdm import tqdm
 
-    episode = 0
-    bar = tqdm(files, unit="file", disable=not progress, desc="collect commonroad")
-    for path in bar:
-        traffic = RecordedTraffic(load_scenario(path), path.stem)
-        for agent, steps in demonstrators(traffic, config):
-            info = read_episode_info(shard_path(out, episode)) if resume else None
-            if info is None:
-                windows = [traffic.scene(agent, step, config.scene) for step in steps]
-                first, last = traffic.span(agent)
-                info = {"episode": episode, "file": path.name, "scenario": traffic.name,
-                        "vehicle_id": int(traffic.ids[agent]), "windows": len(windows),
-                        "time_steps": steps, "simulated_s": (last - first) * traffic.dt_s,
-                        "ego_crashed": False, "ego_off_network": False}
-                write_episode_shard(out, windows, info)
-            infos.append(info)
-            episode += 1
+    scene_config = config.scene
+    bar = tqdm(demos, unit="vehicle", disable=not progress, desc="collect commonroad")
+    for episode, demo in enumerate(bar):
+        info = read_episode_info(shard_path(out, episode)) if resume else None
+        if info is None:
+            traffic = traffics[demo.path]
+            windows = [traffic.scene(demo.agent, step, scene_config) for step in demo.steps]
+            first, last = traffic.span(demo.agent)
+            errors = [_goal_error(traffic, demo.agent, step, scene_config,
+                                  np.flatnonzero(traffic.valid[:, step])).tolist()
+                      for step in demo.steps]
+            info = {"episode": episode, "file": demo.path.name, "scenario": traffic.name,
+                    "group": demo.group, "vehicle_id": int(traffic.ids[demo.agent]),
+                    "windows": len(windows), "time_steps": list(demo.steps),
+                    "goal_error_m": errors, "simulated_s": (last - first) * traffic.dt_s,
+                    "ego_crashed": False, "ego_off_network": False}
+            write_episode_shard(out, windows, info)
+        infos.append(info)
         bar.set_postfix(windows=sum(i["windows"] for i in infos))
     bar.close()

@@ -105,6 +105,7 @@ class DemoDataset(_TorchDataset):
             raise InputError(f"{self.root / INDEX} is missing or unreadable; run "
                              "`riskmap collect ... --resume` to rebuild it") from None
         self._shards: list[dict[str, np.ndarray]] = []
+        self._groups: list[str | None] = []        # per shard: its group, None without one
         self._items: list[tuple[int, int]] = []
         for entry in index["shards"]:
             if entry["windows"] == 0:
@@ -117,6 +118,7 @@ class DemoDataset(_TorchDataset):
                                  f"{entry['windows']}; run `riskmap collect ... --resume`")
             self._items.extend((len(self._shards), i) for i in range(count))
             self._shards.append(arrays)
+            self._groups.append(entry.get("group"))
         if not self._items:
             raise InputError(f"dataset {self.root} holds no windows; collect more episodes")
 
@@ -126,6 +128,17 @@ class DemoDataset(_TorchDataset):
     def episode_of(self, index: int) -> int:
         """The episode (shard) a window comes from."""
         return self._items[index][0]
+
+    def group_of(self, index: int) -> str | None:
+        """The group (recorded data: site and configuration) a window's episode belongs to, or
+        None for data without groups (simulated episodes are independent)."""
+        return self._groups[self._items[index][0]]
+
+    @property
+    def derived(self) -> dict:
+        """Settings derived from recorded data at collection (`riskmap.data.collect_commonroad`):
+        extent, route speed limit and acceleration, goal error; empty for simulated data."""
+        return self.manifest.get("derived", {})
 
     def scene(self, index: int) -> Scene:
         shard, local = self._items[index]

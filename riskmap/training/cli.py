@@ -37,7 +37,10 @@ HELP = {
     "uncertainty_weight": "v of eq. 5",
     "sigma_x": "uncertainty across agents (m)",
     "sigma_y": "uncertainty along agents (m)",
-    "goal_variance": "goal Gaussian (cells^2)",
+    "goal_variance": "goal Gaussian (cells^2); default: from a recorded dataset's goal error, else 5",
+    "val_groups": "recorded data: configurations to validate on (names or numbers, comma-separated); "
+                  "default: the last val-fraction of them",
+    "init_checkpoint": "fine-tune: start from this risk-map checkpoint's weights",
     "goal": "goal of each window: the route rule (as in closed loop) or the demo's end",
     "horizon": "value-iteration steps (default 1.6 x resolution)",
     "device": "auto, cpu or cuda[:N]",
@@ -51,7 +54,8 @@ def add_parsers(sub) -> None:
     p = sub.add_parser("train", help="train the risk-map planner (MaxEnt IRL)")
     add_config_options(p, TrainConfig, "data", "out", "resolution", "uncertainty_weight", "sigma_x",
                        "sigma_y", "goal_variance", "goal", "epochs", "batch_size", "lr", "horizon",
-                       "device", "seed", "backbone_weights", "max_windows", help=HELP,
+                       "val_groups", "device", "seed", "backbone_weights", "init_checkpoint",
+                       "max_windows", help=HELP,
                        option_types=POSITIVE)
     p.add_argument("--resume", action="store_true", help="continue an interrupted run exactly")
     p.add_argument("--quiet", action="store_true")
@@ -60,7 +64,8 @@ def add_parsers(sub) -> None:
     p = sub.add_parser("train-baseline", help="train a behaviour-cloning baseline (cnn, cnn_lstm, rvsg)")
     p.add_argument("kind", choices=("cnn", "cnn_lstm", "cnn-lstm", "rvsg"))
     add_config_options(p, BaselineTrainConfig, "data", "out", "epochs", "batch_size", "lr",
-                       "history_frames", "seed", "max_windows", help=HELP, option_types=POSITIVE)
+                       "history_frames", "val_groups", "seed", "max_windows", help=HELP,
+                       option_types=POSITIVE)
     p.add_argument("--resume", action="store_true", help="continue an interrupted run exactly")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=_cmd_train_baseline)

@@ -24,7 +24,7 @@ class TrainConfig:
     uncertainty_weight: float = 1.0
     sigma_x: float = 0.5
     sigma_y: float = 1.5
-    goal_variance: float = 5.0
+    goal_variance: float | None = None  # None: from the dataset's goal error, else 5.0
     goal: str = "route"
     epochs: int = 10
     batch_size: int = 32
@@ -32,7 +32,8 @@ class TrainConfig:
     grad_clip: float = 10.0
     horizon: int | None = None          # value-iteration steps; default 1.6 × resolution
     gamma: float = 1.0
-    val_fraction: float = 0.15          # share of episodes held out
+    val_fraction: float = 0.15          # share of episodes (or groups) held out
+    val_groups: tuple[str, ...] | None = None   # recorded data: configurations held out
     val_ade_windows: int = 128          # validation windows on which the sampler runs
     augment_probability: float = 0.5    # share of training windows with a perturbed ego pose
     augment_heading_deg: float = 10.0
@@ -40,9 +41,14 @@ class TrainConfig:
     seed: int = 0
     device: str = "auto"
     backbone_weights: str | None = None
+    init_checkpoint: str | None = None  # fine-tune: start from this risk-map checkpoint's weights
     max_windows: int | None = None      # cap on training windows (smoke tests)
 
     def __post_init__(self) -> None:
+        if self.val_groups is not None:
+            object.__setattr__(self, "val_groups", tuple(self.val_groups))
+        if self.goal_variance is not None and not self.goal_variance > 0:
+            raise InputError(f"--goal-variance must be positive (cells²), got {self.goal_variance}")
         for name in ("epochs", "batch_size", "resolution"):
             if getattr(self, name) < 1:
                 raise InputError(f"--{name.replace('_', '-')} must be positive")
@@ -51,12 +57,12 @@ class TrainConfig:
         if not 0 < self.val_fraction < 1:
             raise InputError(f"val_fraction must be in (0, 1), got {self.val_fraction}")
 
-    @property
-    def irl(self):
-        """The IRL settings of this run (riskmap.planner.irl.IRLConfig)."""
+    def irl(self, goal_variance: float):
+        """The IRL settings of this run (riskmap.planner.irl.IRLConfig) with the goal variance
+        it resolved (`riskmap.training.train.resolve_goal_variance`)."""
         from riskmap.planner.irl import IRLConfig
 
-        return IRLConfig(self.horizon, self.gamma, self.uncertainty_weight, self.goal_variance)
+        return IRLConfig(self.horizon, self.gamma, self.uncertainty_weight, goal_variance)
 
 
 @dataclass(frozen=True)
@@ -71,6 +77,7 @@ class BaselineTrainConfig:
     lr: float = 3e-4
     history_frames: int = 4             # cnn_lstm only
     val_fraction: float = 0.15
+    val_groups: tuple[str, ...] | None = None   # recorded data: configurations held out
     augment_probability: float = 0.5    # as the risk-map planner's training
     augment_heading_deg: float = 10.0
     augment_lateral_m: float = 1.0
@@ -79,6 +86,8 @@ class BaselineTrainConfig:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "kind", _normalise_kind(self.kind))
+        if self.val_groups is not None:
+            object.__setattr__(self, "val_groups", tuple(self.val_groups))
         for name in ("epochs", "batch_size", "history_frames"):
             if getattr(self, name) < 1:
                 raise InputError(f"--{name.replace('_', '-')} must be positive")

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import math
+import re
 import time
 from dataclasses import asdict
 from pathlib import Path
@@ -37,31 +38,90 @@ def resolve_device(name: str) -> torch.device:
     return torch.device(name)
 
 
-def split_episodes(dataset: DemoDataset, val_fraction: float) -> tuple[list[int], list[int]]:
-    """Window indices of training and validation episodes (the last episodes are held out)."""
+def _natural_key(name: str) -> list:
+    """Sort key that orders `USA_US101-9` before `USA_US101-10`."""
+    return [int(part) if part.isdigit() else part for part in re.split(r"(\d+)", name)]
+
+
+def _held_out_groups(dataset: DemoDataset, groups: list[str], val_fraction: float,
+                     val_groups: tuple[str, ...] | None) -> set[str]:
+    """The groups to validate on: `val_groups` (full names, or configuration numbers matched
+    against the name's `-N` suffix), else the last ⌈val_fraction × groups⌉ in natural order."""
+    if not val_groups:
+        return set(groups[-max(1, int(math.ceil(val_fraction * len(groups)))):])
+    chosen = set()
+    for wanted in val_groups:
+        hits = [g for g in groups if g == wanted or g.endswith(f"-{wanted}")]
+        if not hits:
+            raise InputError(f"--val-groups {wanted}: dataset {dataset.root} has no such group; its "
+                             f"groups are {', '.join(groups)}")
+        chosen.update(hits)
+    return chosen
+
+
+def split_episodes(dataset: DemoDataset, val_fraction: float,
+                   val_groups: tuple[str, ...] | None = None) -> tuple[list[int], list[int]]:
+    """Window indices of training and validation windows.
+
+    Recorded data (shards with a group): whole groups are held out, so a recorded moment of
+    traffic never lands on both sides (`_held_out_groups`). Simulated data: the last episodes.
+    """
     episodes = sorted({dataset.episode_of(i) for i in range(len(dataset))})
-    n_val = max(1, int(math.ceil(val_fraction * len(episodes))))
-    if len(episodes) < 2:
-        raise InputError(f"dataset {dataset.root} has {len(episodes)} episode(s) with windows; "
-                         "training needs at least 2 (one is held out for validation)")
-    val_eps = set(episodes[-n_val:])
-    train = [i for i in range(len(dataset)) if dataset.episode_of(i) not in val_eps]
-    val = [i for i in range(len(dataset)) if dataset.episode_of(i) in val_eps]
+    groups = sorted({g for g in (dataset.group_of(i) for i in range(len(dataset))) if g is not None},
+                    key=_natural_key)
+    if groups:
+        if len(groups) < 2:
+            raise InputError(f"dataset {dataset.root} holds one recorded group ({groups[0]}); "
+                             "training needs at least 2 (one is held out for validation)")
+        held = _held_out_groups(dataset, groups, val_fraction, val_groups)
+        if held == set(groups):
+            raise InputError(f"--val-groups holds out every group of {dataset.root}; leave some "
+                             "to train on")
+        is_val = [dataset.group_of(i) in held for i in range(len(dataset))]
+    else:
+        if val_groups:
+            raise InputError(f"--val-groups: dataset {dataset.root} has no groups (only recorded "
+                             "data from `riskmap collect --from-commonroad` has); drop the option")
+        if len(episodes) < 2:
+            raise InputError(f"dataset {dataset.root} has {len(episodes)} episode(s) with windows; "
+                             "training needs at least 2 (one is held out for validation)")
+        n_val = max(1, int(math.ceil(val_fraction * len(episodes))))
+        val_eps = set(episodes[-n_val:])
+        is_val = [dataset.episode_of(i) in val_eps for i in range(len(dataset))]
+    train = [i for i in range(len(dataset)) if not is_val[i]]
+    val = [i for i in range(len(dataset)) if is_val[i]]
     return train, val
+
+
+DEFAULT_GOAL_VARIANCE = 5.0      # cells²; highway-env data (experiments/README.md)
+
+
+def resolve_goal_variance(requested: float | None, dataset: DemoDataset) -> float:
+    """The training goal variance (cells²): `requested`, else from the spread of the route
+    rule's goal around where the humans were at the horizon's end (recorded data: the
+    manifest's `derived.goal_error_rms_m`, metres along and across, over the grid's cells),
+    else `DEFAULT_GOAL_VARIANCE`."""
+    if requested is not None:
+        return float(requested)
+    rms = dataset.derived.get("goal_error_rms_m")
+    if not rms:
+        return DEFAULT_GOAL_VARIANCE
+    grid = dataset.grid
+    return round(0.5 * ((rms["along"] / grid.row_m) ** 2 + (rms["across"] / grid.col_m) ** 2), 3)
 
 
 def _to(batch: dict, device: torch.device) -> dict:
     return {k: v.to(device) for k, v in batch.items()}
 
 
-def _evaluate(model, loader, config: TrainConfig, grid, device) -> dict:
+def _evaluate(model, loader, config: TrainConfig, irl, grid, device) -> dict:
     model.eval()
     nll, ade, fde, seen = [], [], [], 0
     with torch.no_grad():
         for batch in loader:
             batch = _to(batch, device)
             risk = model(batch["raster"], batch["motion"])
-            step = irl_step(risk, batch, config.irl)
+            step = irl_step(risk, batch, irl)
             nll.append(demo_negative_log_likelihood(step.policy, batch["demo_path"]).cpu())
             for i in range(risk.shape[0]):
                 if seen >= config.val_ade_windows:
@@ -76,22 +136,43 @@ def _evaluate(model, loader, config: TrainConfig, grid, device) -> dict:
             "val_fde_m": float(np.mean(fde))}
 
 
-def _sidecar(config: TrainConfig, model_config: ModelConfig, dataset: DemoDataset, metrics: dict,
-             epoch: int) -> dict:
+def dataset_sidecar(dataset: DemoDataset, train_idx: list[int], val_idx: list[int]) -> dict:
+    """What a checkpoint records of its data: source, window counts, held-out groups and the
+    settings derived from recorded data (the route rule's speed limit and acceleration, which
+    the planner needs in closed loop: `riskmap.sim.commonroad_replay.route_scene_config`)."""
+    groups = sorted({dataset.group_of(i) for i in val_idx} - {None}, key=_natural_key)
+    return {"env_id": dataset.source, "windows": len(dataset), "train_windows": len(train_idx),
+            "val_windows": len(val_idx), "val_groups": groups, "derived": dataset.derived,
+            "git_commit": dataset.manifest.get("git_commit")}
+
+
+def _sidecar(config: TrainConfig, model_config: ModelConfig, dataset: DemoDataset, irl,
+             data: dict, metrics: dict, epoch: int) -> dict:
     return {
         "model": model_config.to_dict(),
         "raster": dataset.raster_config.to_dict(),
         "grid": dataset.grid.to_dict(),
-        "irl": asdict(config.irl),
+        "irl": asdict(irl),
         "train": asdict(config),
         "sampler": asdict(SamplerConfig()),
         "maps": {"sigma_x": config.sigma_x, "sigma_y": config.sigma_y,
-                 "goal_variance": config.goal_variance, "goal": config.goal},
-        "dataset": {"env_id": dataset.source, "windows": len(dataset),
-                    "git_commit": dataset.manifest.get("git_commit")},
+                 "goal_variance": irl.goal_variance, "goal": config.goal},
+        "dataset": data,
         "epoch": epoch,
         "metrics": metrics,
     }
+
+
+def _init_from(model: RiskMapGenerator, model_config: ModelConfig, checkpoint: Path) -> None:
+    """Start from a trained risk-map checkpoint's weights (fine-tuning); its network must be the
+    one this run builds (raster channels and grid resolution)."""
+    from riskmap.planner.model import load_model
+
+    trained, side = load_model(checkpoint)
+    if ModelConfig(**side["model"]) != model_config:
+        raise InputError(f"--init-checkpoint {checkpoint} is a {side['model']} network, this run "
+                         f"builds {model_config.to_dict()}; use a matching --resolution")
+    model.load_state_dict(trained.state_dict())
 
 
 def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> dict:
@@ -104,9 +185,10 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
     device = resolve_device(config.device)
     torch.manual_seed(config.seed)
     dataset = DemoDataset(config.data, config.resolution, sigma_x=config.sigma_x,
-                          sigma_y=config.sigma_y, goal_variance=config.goal_variance,
-                          goal=config.goal)
-    train_idx, val_idx = split_episodes(dataset, config.val_fraction)
+                          sigma_y=config.sigma_y, goal=config.goal)
+    dataset.goal_variance = resolve_goal_variance(config.goal_variance, dataset)
+    irl = config.irl(dataset.goal_variance)
+    train_idx, val_idx = split_episodes(dataset, config.val_fraction, config.val_groups)
     if config.max_windows:
         train_idx = train_idx[: config.max_windows]
         val_idx = val_idx[: max(1, config.max_windows // 4)]
@@ -117,6 +199,8 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
     model = RiskMapGenerator(model_config)
     if config.backbone_weights:
         load_backbone_weights(model, config.backbone_weights)
+    if config.init_checkpoint:
+        _init_from(model, model_config, Path(config.init_checkpoint))
     model.to(device)
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr)
     start_epoch, best = 0, {"val_ade_m": math.inf}
@@ -132,6 +216,7 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
         start_epoch = previous["epoch"] + 1
         best = previous["best"]
     out.mkdir(parents=True, exist_ok=True)
+    data = dataset_sidecar(dataset, train_idx, val_idx)
     writer = SummaryWriter(str(out / "tb"), purge_step=start_epoch)
     val_loader = DataLoader(Subset(dataset, val_idx), batch_size=config.batch_size)
     log_path = out / "log.csv"
@@ -153,7 +238,7 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
         for batch in bar:
             batch = _to(batch, device)
             risk = model(batch["raster"], batch["motion"])
-            step = irl_step(risk, batch, config.irl)
+            step = irl_step(risk, batch, irl)
             optimizer.zero_grad()
             step.loss.backward()
             torch.nn.utils.clip_grad_norm_(model.parameters(), config.grad_clip)
@@ -162,7 +247,7 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
             nlls.append(demo_negative_log_likelihood(step.policy, batch["demo_path"]).mean().item())
             bar.set_postfix(nll=f"{np.mean(nlls):.2f}")
         metrics = {"train_loss": float(np.mean(losses)), "train_nll": float(np.mean(nlls)),
-                   **_evaluate(model, val_loader, config, dataset.grid, device)}
+                   **_evaluate(model, val_loader, config, irl, dataset.grid, device)}
         metrics["seconds"] = round(time.perf_counter() - started, 1)
         for key, value in metrics.items():
             writer.add_scalar(key, value, epoch)
@@ -170,12 +255,12 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
             csv.DictWriter(f, fields).writerow({"epoch": epoch, **metrics})
         if metrics["val_ade_m"] < best["val_ade_m"]:
             best = {"epoch": epoch, **metrics}
-            save_checkpoint(out / "best", model, _sidecar(config, model_config, dataset, metrics, epoch)
+            save_checkpoint(out / "best", model, _sidecar(config, model_config, dataset, irl, data, metrics, epoch)
                             | {"best": best})
         # Progress last, so that a run killed mid-save resumes from the previous epoch.
         atomic_write(out / "last_optimizer.pt", lambda f: torch.save(optimizer.state_dict(), f))
         save_checkpoint(out / "last", model,
-                        _sidecar(config, model_config, dataset, metrics, epoch) | {"best": best})
+                        _sidecar(config, model_config, dataset, irl, data, metrics, epoch) | {"best": best})
         if progress:
             print(f"epoch {epoch + 1}/{config.epochs}: " +
                   ", ".join(f"{k} {v:.3f}" for k, v in metrics.items()), flush=True)

@@ -27,7 +27,7 @@ from riskmap.infra.checkpoint import read_sidecar, save_checkpoint
 from riskmap.infra.rundir import refuse_unless_resume
 from riskmap.planner.bc import CHECKPOINT_KIND, BCConfig, BCNet, bc_inputs
 from riskmap.training.config import BaselineTrainConfig
-from riskmap.training.train import split_episodes
+from riskmap.training.train import dataset_sidecar, resolve_goal_variance, split_episodes
 
 
 class BCWindows(Dataset):
@@ -79,12 +79,10 @@ def _validate(model: BCNet, loader: DataLoader) -> dict:
     return {"val_ade_m": float(err.mean()), "val_fde_m": float(err[:, -1].mean())}
 
 
-def _sidecar(config: BaselineTrainConfig, bc: BCConfig, dataset: DemoDataset, metrics: dict,
-             epoch: int, best: dict) -> dict:
+def _sidecar(config: BaselineTrainConfig, bc: BCConfig, dataset: DemoDataset, data: dict,
+             metrics: dict, epoch: int, best: dict) -> dict:
     return {"bc": bc.to_dict(), "raster": dataset.raster_config.to_dict(), "train": asdict(config),
-            "dataset": {"env_id": dataset.source, "windows": len(dataset),
-                        "git_commit": dataset.manifest.get("git_commit")},
-            "epoch": epoch, "metrics": metrics, "best": best}
+            "dataset": data, "epoch": epoch, "metrics": metrics, "best": best}
 
 
 def train_baseline(config: BaselineTrainConfig, resume: bool = False, progress: bool = True) -> dict:
@@ -95,12 +93,12 @@ def train_baseline(config: BaselineTrainConfig, resume: bool = False, progress: 
     refuse_unless_resume(out, "a training run", "last.json", resume)
     torch.manual_seed(config.seed)
     dataset = DemoDataset(config.data)
-    train_idx, val_idx = split_episodes(dataset, config.val_fraction)
+    train_idx, val_idx = split_episodes(dataset, config.val_fraction, config.val_groups)
     if config.max_windows:
         train_idx = train_idx[: config.max_windows]
         val_idx = val_idx[: max(1, config.max_windows // 4)]
     bc = BCConfig(kind=config.kind, in_channels=len(CHANNELS), history_frames=config.history_frames,
-                  goal_variance=dataset.goal_variance)
+                  goal_variance=resolve_goal_variance(None, dataset))
     model = BCNet(bc)
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr)
     start_epoch, best = 0, {"val_ade_m": math.inf}
@@ -115,6 +113,7 @@ def train_baseline(config: BaselineTrainConfig, resume: bool = False, progress: 
         optimizer.load_state_dict(torch.load(out / "last_optimizer.pt", weights_only=True))
         start_epoch, best = previous["epoch"] + 1, previous["best"]
     out.mkdir(parents=True, exist_ok=True)
+    data = dataset_sidecar(dataset, train_idx, val_idx)
     augment = (config.augment_probability, config.augment_heading_deg, config.augment_lateral_m)
     train_set = BCWindows(dataset, bc, augment, config.seed)
     val_loader = DataLoader(Subset(BCWindows(dataset, bc, None), val_idx), batch_size=config.batch_size)
@@ -146,11 +145,11 @@ def train_baseline(config: BaselineTrainConfig, resume: bool = False, progress: 
             csv.DictWriter(f, fields).writerow({"epoch": epoch, **metrics})
         if metrics["val_ade_m"] < best["val_ade_m"]:
             best = {"epoch": epoch, **metrics}
-            save_checkpoint(out / "best", model, _sidecar(config, bc, dataset, metrics, epoch, best),
+            save_checkpoint(out / "best", model, _sidecar(config, bc, dataset, data, metrics, epoch, best),
                             kind=CHECKPOINT_KIND)
         # Progress last, so that a run killed mid-save resumes from the previous epoch.
         atomic_write(out / "last_optimizer.pt", lambda f: torch.save(optimizer.state_dict(), f))
-        save_checkpoint(out / "last", model, _sidecar(config, bc, dataset, metrics, epoch, best),
+        save_checkpoint(out / "last", model, _sidecar(config, bc, dataset, data, metrics, epoch, best),
                         kind=CHECKPOINT_KIND)
         if progress:
             print(f"{config.kind} epoch {epoch + 1}/{config.epochs}: " +
