@@ -52,3 +52,14 @@ def load_weights(model: torch.nn.Module, path: Path, fix: str) -> torch.nn.Modul
     except (RuntimeError, OSError) as err:
         raise InputError(f"checkpoint {path} does not match its config ({err}); {fix}") from None
     return model.eval()
+
+
+def route_settings_of(sidecar: dict) -> dict | None:
+    """The route rule a planner was trained with when its data was recorded traffic
+    (`speed_limit_mps`, `route_accel_mps2`, derived at collection), or None (simulated data: the
+    simulator's lanes carry their own limits)."""
+    derived = sidecar.get("dataset", {}).get("derived") or {}
+    if "speed_limit_mps" not in derived:
+        return None
+    return {"speed_limit_mps": float(derived["speed_limit_mps"]),
+            "route_accel_mps2": float(derived["route_accel_mps2"])}

@@ -28,6 +28,7 @@ from torch import nn
 from rasterize.config import GridConfig, RasterConfig
 from rasterize.errors import InputError
 from rasterize.maps import goal_map, route_goal_cell
+from riskmap.infra.checkpoint import route_settings_of
 from rasterize.raster import rasterize_scene
 from rasterize.scene import Scene
 from riskmap.planner.model import ModelConfig, RiskMapGenerator
@@ -169,9 +170,10 @@ def load_bc(path: str | Path) -> tuple[BCNet, dict]:
 class BCPlanner:
     """`cnn:PATH`, `cnn_lstm:PATH`, `rvsg:PATH`: a trained baseline network behind the Planner protocol."""
 
-    def __init__(self, model: BCNet, raster: RasterConfig):
+    def __init__(self, model: BCNet, raster: RasterConfig, route_settings: dict | None = None):
         self.model, self.raster = model.eval(), raster
         self.config = model.config
+        self.route_settings = route_settings    # route rule of recorded training data, if any
 
     @classmethod
     def load(cls, checkpoint: str | Path, expected_kind: str | None = None) -> BCPlanner:
@@ -179,7 +181,7 @@ class BCPlanner:
         if expected_kind is not None and model.config.kind != normalise_kind(expected_kind):
             raise InputError(f"checkpoint {checkpoint} holds a {model.config.kind} baseline, not "
                              f"{normalise_kind(expected_kind)}; use the matching SPEC prefix")
-        return cls(model, RasterConfig.from_dict(side["raster"]))
+        return cls(model, RasterConfig.from_dict(side["raster"]), route_settings_of(side))
 
     def reset(self, scene: Scene) -> None:
         pass

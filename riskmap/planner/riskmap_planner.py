@@ -12,6 +12,7 @@ from rasterize.errors import InputError
 from rasterize.maps import goal_map, motion_features, route_goal_cell, start_cell
 from rasterize.raster import rasterize_scene
 from rasterize.scene import Scene
+from riskmap.infra.checkpoint import route_settings_of
 from riskmap.planner.irl import goal_log_map
 from riskmap.planner.sampler import SamplerConfig, sample_trajectory
 from riskmap.planner.vi import soft_value_iteration, state_visitation
@@ -31,6 +32,7 @@ class RiskMapPlanner:
         self.model, self.raster, self.grid = model.eval(), raster, grid
         self.horizon, self.goal_variance, self.gamma = horizon, goal_variance, gamma
         self.sampler, self.seed = sampler, seed
+        self.route_settings: dict | None = None   # route rule of recorded training data, if any
         self._calls = 0
 
     @classmethod
@@ -54,9 +56,11 @@ class RiskMapPlanner:
             variance = side.get("planning", {}).get("goal_variance", side["irl"]["goal_variance"])
         if variance <= 0:
             raise InputError(f"goal variance must be > 0 cells², got {variance}")
-        return cls(model, RasterConfig.from_dict(side["raster"]), GridConfig.from_dict(side["grid"]),
-                   side["irl"]["horizon"], variance, side["irl"]["gamma"],
-                   SamplerConfig(**side["sampler"]), seed)
+        planner = cls(model, RasterConfig.from_dict(side["raster"]), GridConfig.from_dict(side["grid"]),
+                      side["irl"]["horizon"], variance, side["irl"]["gamma"],
+                      SamplerConfig(**side["sampler"]), seed)
+        planner.route_settings = route_settings_of(side)
+        return planner
 
     def reset(self, scene: Scene) -> None:
         self._calls = 0

@@ -321,6 +321,20 @@ def _human_metrics(world: CommonRoadWorld) -> dict:
     }
 
 
+def route_scene_config(planner, base: CommonRoadSceneConfig | None = None) -> CommonRoadSceneConfig:
+    """What `planner` sees of a recording: `base` (default settings) with the route rule the
+    planner was trained with, when it declares one (`route_settings`: a planner trained on
+    recorded traffic sends itself as far as the recorded drivers went, not at highway-env's
+    speeds)."""
+    base = base or CommonRoadSceneConfig()
+    settings = getattr(planner, "route_settings", None)
+    if not settings:
+        return base
+    return dataclasses.replace(base, speed_limit_mps=settings["speed_limit_mps"],
+                               route_rule=dataclasses.replace(base.route_rule,
+                                                              accel_mps2=settings["route_accel_mps2"]))
+
+
 def replay_commonroad_episode(scenario_path, ego_id: int, planner, start_s: float | None = None,
                               duration_s: float | None = None, config: ReplayConfig | None = None,
                               scene_config: CommonRoadSceneConfig | None = None) -> dict:
@@ -329,12 +343,14 @@ def replay_commonroad_episode(scenario_path, ego_id: int, planner, start_s: floa
 
     `scenario_path`: a .xml path or a `RecordedTraffic`. `start_s` defaults to the vehicle's first
     time with `config.history_s` of history; the episode ends with its recording (or after
-    `duration_s`). `scene_config` sets what the planner sees (as for collected windows).
+    `duration_s`). `scene_config` sets what the planner sees (as for collected windows); by
+    default `route_scene_config(planner)`.
     """
     config = config or ReplayConfig()
     traffic = (scenario_path if isinstance(scenario_path, RecordedTraffic)
                else RecordedTraffic(load_scenario(scenario_path), Path(scenario_path).stem))
-    world = CommonRoadWorld(traffic, ego_id, start_s, duration_s, config, scene_config)
+    world = CommonRoadWorld(traffic, ego_id, start_s, duration_s, config,
+                            scene_config or route_scene_config(planner))
     loop = drive_world(world, planner, LoopConfig(world.n_steps, config.control_hz // config.replan_hz,
                                                   config.history_s, config.gap_radius_m))
     human = _human_metrics(world)
