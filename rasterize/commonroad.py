@@ -183,6 +183,20 @@ def _recorded_states(obstacle) -> list:
 MAX_SPEED_MPS = 70.0     # a recorded step implying more than this is a jump, not driving
 
 
+class SetBasedRecording(InputError):
+    """A CommonRoad file whose states are sets (intervals, shapes: the `_S-1` scenarios) rather
+    than recorded trajectories; nothing can be replayed or learned from it."""
+
+
+def _is_exact(state) -> bool:
+    """Whether a CommonRoad state is a recorded point: a 2-vector position and plain numbers."""
+    position = getattr(state, "position", None)
+    if not (isinstance(position, np.ndarray) and position.shape == (2,)):
+        return False
+    return all(isinstance(getattr(state, name, None), (int, float, np.number, type(None)))
+               for name in ("orientation", "velocity"))
+
+
 def _track_problem(record: list, dt_s: float) -> str:
     """Why a recorded track cannot be used ("" when it can): non-finite values or a jump."""
     steps = np.array([int(st.time_step) for st in record])
@@ -250,6 +264,11 @@ class RecordedTraffic:
         obstacles, records = [], []
         for obstacle in sorted(scenario.dynamic_obstacles, key=lambda o: o.obstacle_id):
             record = _recorded_states(obstacle)
+            if not all(map(_is_exact, record)):
+                raise SetBasedRecording(
+                    f"CommonRoad scenario {self.name} is set-based (obstacle {obstacle.obstacle_id} "
+                    "has interval or shape states, as in _S-1 files), not a recorded trajectory; "
+                    "pass the trajectory files (_T-1)")
             problem = _track_problem(record, self.dt_s)
             if problem:
                 self.rejected[int(obstacle.obstacle_id)] = problem

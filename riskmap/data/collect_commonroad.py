@@ -20,6 +20,8 @@ in several files. Here:
   along and across the heading) is stored for the trainer's goal variance. All in the manifest.
 
 A directory mixing sites is refused (extents and speeds differ; collect each site on its own).
+Set-based scenarios (`_S-1`: intervals instead of trajectories) in a directory are skipped and
+counted; a single one, or a directory of nothing else, is an error.
 Same shard format, index and manifest as `riskmap collect`; `--resume` keeps the shards already
 written.
 """
@@ -39,6 +41,7 @@ import numpy as np
 from rasterize.commonroad import (
     CommonRoadSceneConfig,
     RecordedTraffic,
+    SetBasedRecording,
     load_scenario,
     route_on_lanelets,
 )
@@ -203,9 +206,16 @@ def unique_demonstrators(files: list[Path], config: CommonRoadCollectConfig,
     traffics: dict[Path, RecordedTraffic] = {}
     seen: set[tuple[str, str]] = set()
     out: list[Demonstrator] = []
-    skipped = {"duplicate_tracks": 0, "rejected_tracks": 0, "files_without_windows": 0}
+    skipped = {"duplicate_tracks": 0, "rejected_tracks": 0, "files_without_windows": 0,
+               "set_based_files": 0}
     for path in tqdm(files, unit="file", disable=not progress, desc="read recordings"):
-        traffic = RecordedTraffic(load_scenario(path), path.stem, smoothing_s=config.smoothing_s)
+        try:
+            traffic = RecordedTraffic(load_scenario(path), path.stem, smoothing_s=config.smoothing_s)
+        except SetBasedRecording:
+            if len(files) == 1:
+                raise
+            skipped["set_based_files"] += 1      # a folder may hold both kinds: use the _T ones
+            continue
         traffics[path] = traffic
         skipped["rejected_tracks"] += len(traffic.rejected)
         group = recording_group(path)[1]
@@ -219,6 +229,15 @@ def unique_demonstrators(files: list[Path], config: CommonRoadCollectConfig,
             seen.add(key)
             out.append(Demonstrator(path, agent, tuple(steps), group))
     return out, traffics, skipped
+
+
+def no_demonstrators_message(files: list[Path], config: CommonRoadCollectConfig, skipped: dict) -> str:
+    """Why recordings gave nobody to learn from (or to drive), as one line."""
+    if skipped.get("set_based_files") == len(files):
+        return (f"all {len(files)} file(s) are set-based (_S-1) scenarios without recorded "
+                "trajectories; pass the trajectory files (_T-1)")
+    return (f"no recorded vehicle in {len(files)} file(s) has {config.history_s:g} s of history "
+            f"and {config.future_s:g} s of future; use longer recordings")
 
 
 def derived_extent(forward_m: np.ndarray, lateral_m: np.ndarray) -> Extent:
@@ -295,8 +314,7 @@ def collect_commonroad(inputs: list[str | Path], out: Path, resume: bool = False
         _check_out_dir(out, config, resume)     # a wrong --out fails before the slow reading
     demos, traffics, skipped = unique_demonstrators(files, config, progress)
     if not demos:
-        raise InputError(f"no recorded vehicle in {len(files)} file(s) has {config.history_s:g} s "
-                         f"of history and {config.future_s:g} s of future; use longer recordings")
+        raise InputError(no_demonstrators_message(files, config, skipped))
     derivation = None
     if config.derive:
         config, derivation = derive_settings(demos, traffics, config)

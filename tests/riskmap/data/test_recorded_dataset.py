@@ -156,3 +156,23 @@ def test_tracks_that_are_not_finite_or_jump_are_left_out(tmp_path, change, reaso
     assert np.isfinite(traffic.states).all()
     clean = RecordedTraffic(load_scenario(RECORDING), RECORDING.stem)
     assert len(traffic.ids) == len(clean.ids) - 1 and not clean.rejected
+
+
+def _set_based_copy(folder: Path) -> Path:
+    """The fixture with every velocity an interval, as in a set-based (_S-1) scenario."""
+    text = re.sub(r"<velocity>\s*<exact>([^<]*)</exact>\s*</velocity>",
+                  r"<velocity><intervalStart>\1</intervalStart><intervalEnd>\1</intervalEnd></velocity>",
+                  RECORDING.read_text())
+    path = folder / "USA_US101-4_1_S-1.xml"
+    path.write_text(text)
+    return path
+
+
+def test_a_set_based_file_is_one_line_and_skipped_beside_trajectory_files(tmp_path):
+    folder = _copies(tmp_path, "USA_US101-4_1_T-1.xml")
+    set_based = _set_based_copy(folder)
+    with pytest.raises(InputError, match=r"set-based .*pass the trajectory files \(_T-1\)"):
+        collect_commonroad([set_based], tmp_path / "alone", progress=False)
+    assert not (tmp_path / "alone").exists()
+    manifest = collect_commonroad([folder], tmp_path / "both", progress=False)
+    assert manifest["skipped"]["set_based_files"] == 1 and manifest["counts"]["episodes"] == 8
