@@ -1,7 +1,8 @@
 """`riskmap evaluate --commonroad DIR [--mode log|reactive]`: planners drive recorded human vehicles.
 
 Every vehicle that `riskmap collect --from-commonroad` makes a demonstrator (2 s of history and
-6 s of future in its record) is one episode: it is handed over to the planner 2 s into its
+6 s of future in its record; once, however many files of its traffic configuration hold it) is
+one episode: it is handed over to the planner 2 s into its
 record and driven to the end of it, among the other recorded vehicles replaying their tracks
 (`riskmap.sim.commonroad_replay`, a highway-env road built from the lanelets): by time in `log`
 mode, along their paths braking for the ego in `reactive` mode. Per planner and
@@ -9,6 +10,8 @@ episode OUT/episodes/<planner>/<scenario>_<vehicle>.json (atomic; `--resume` ski
 ones), then OUT/results.json and OUT/table.md with means and 90th percentiles.
 
 `replay` is the recording itself, tracked by the same controller: the harness's error floor.
+`idm` is the rule-based baseline: IDM + MOBIL along the recorded vehicle's lanelets
+(`riskmap.sim.recorded_idm`).
 Safety % is the simulated scenes' (`riskmap.sim.metrics`: share of encounters with a recorded vehicle
 within 30 m that are dangerously close), per episode, then mean and 90th percentile; the share
 of episodes without a collision or leaving the road is reported beside it.
@@ -23,7 +26,12 @@ import numpy as np
 
 from rasterize.commonroad import RecordedTraffic, load_scenario
 from rasterize.errors import InputError
-from riskmap.data.collect_commonroad import CommonRoadCollectConfig, demonstrators, scenario_files
+from riskmap.data.collect_commonroad import (
+    CommonRoadCollectConfig,
+    no_demonstrators_message,
+    scenario_files,
+    unique_demonstrators,
+)
 from riskmap.evaluation.evaluate import planner_slug
 from riskmap.infra.atomic import atomic_write, write_json
 from riskmap.infra.parallel import run_parallel
@@ -45,16 +53,16 @@ def _traffic(path: Path) -> RecordedTraffic:
 
 
 def _planner(spec: str, traffic: RecordedTraffic, vehicle_id: int, seed: int):
-    """The planner for one episode. `replay` is tied to its recording; any other SPEC is made once
-    per process and reused (each episode resets it, so results do not depend on order)."""
+    """The planner for one episode. `replay` and `idm` are tied to their recording; any other SPEC
+    is made once per process and reused (each episode resets it, so results do not depend on order)."""
     from riskmap.registry import cached_planner
     from riskmap.sim.commonroad_replay import RecordedFuturePlanner
+    from riskmap.sim.recorded_idm import RecordedRouteIdmPlanner
 
     if spec == "replay":
         return RecordedFuturePlanner(traffic, vehicle_id)
     if spec == "idm":
-        raise InputError("--planners idm: on recordings the human is the recording itself; "
-                         "use `replay`")
+        return RecordedRouteIdmPlanner(traffic, vehicle_id)
     return cached_planner(spec, seed)
 
 
@@ -124,17 +132,17 @@ def evaluate_commonroad(recordings: list[str | Path], planners: tuple[str, ...],
     out = Path(out)
     ReplayConfig(goal=goal, mode=mode)    # validates the goal and mode before any work
     files = scenario_files(recordings)
-    config = CommonRoadCollectConfig(files=())
-    episodes = []
-    for path in files:
-        traffic = _traffic(path)
-        episodes += [(path, traffic.name, int(traffic.ids[agent]))
-                     for agent, _ in demonstrators(traffic, config)]
-    if not episodes:
-        raise InputError(f"no recorded vehicle in {', '.join(map(str, recordings))} has 2 s of "
-                         "history and 6 s of future; nothing to evaluate")
+    # The recording as it is (no smoothing); a vehicle recorded in several files of one traffic
+    # configuration is one episode (the first file's).
+    config = CommonRoadCollectConfig(files=(), smoothing_s=0.0)
+    demos, traffics, skipped = unique_demonstrators(files, config)
+    if not demos:
+        raise InputError(f"--commonroad: {no_demonstrators_message(files, config, skipped)}; "
+                         "nothing to evaluate")
+    _TRAFFIC.update(traffics)
+    episodes = [(d.path, traffics[d.path].name, int(traffics[d.path].ids[d.agent])) for d in demos]
     for spec in planners:           # a bad SPEC fails here, before anything is written
-        if spec != "replay":
+        if spec not in ("replay", "idm"):       # these two are made per recorded vehicle
             _planner(spec, None, 0, seed)
     meta = {"recordings": [str(p) for p in files], "planners": list(planners), "seed": seed, "goal": goal,
             "mode": mode}
