@@ -29,14 +29,25 @@ from riskmap.infra.checkpoint import read_sidecar
 from riskmap.planner.riskmap_planner import RiskMapPlanner
 
 
+def with_human_goal(scene):
+    """`scene` with its route replaced by the straight line to where the human was at the end of
+    the recorded future, so the planner's goal is the human's (the `--goal human` protocol, as
+    `riskmap.sim.commonroad_replay.CommonRoadWorld.scene` does in closed loop)."""
+    import dataclasses
+
+    end = scene.ego_future_xy()[-1]
+    return dataclasses.replace(scene, route_xy=np.linspace(scene.ego_state()[:2], end, 200))
+
+
 def window_errors(planner: RiskMapPlanner, dataset: DemoDataset, indices, sigma_x: float,
-                  sigma_y: float) -> dict[str, list[float]]:
-    """Per-window ADE, FDE, goal error, SVF overlap and planning time of `planner` on `indices`."""
+                  sigma_y: float, goal: str = "route") -> dict[str, list[float]]:
+    """Per-window ADE, FDE, goal error, SVF overlap and planning time of `planner` on `indices`,
+    towards the route rule's goal or (`goal="human"`) the human's own end."""
     out = {"index": [], "ade_m": [], "fde_m": [], "goal_error_m": [], "overlap": [], "plan_ms": [],
            "plan_end_m": [], "demo_end_m": [], "end_short_m": [], "vi_ms": []}
     for i in indices:
         scene = dataset.scene(int(i))
-        plan = planner.plan(scene)
+        plan = planner.plan(with_human_goal(scene) if goal == "human" else scene)
         origin, heading = ego_pose(scene)
         demo = ego_from_world(scene.ego_future_xy(), origin, heading)
         err = np.linalg.norm(plan.waypoints - demo, axis=1)
@@ -57,15 +68,22 @@ def window_errors(planner: RiskMapPlanner, dataset: DemoDataset, indices, sigma_
 
 
 def evaluate(checkpoint: Path, data: Path, limit: int | None = None, seed: int = 0,
-             goal_variance: float | None = None) -> dict:
-    """Plan quality of `checkpoint` on `limit` windows of `data` spread evenly (all if None)."""
+             goal_variance: float | None = None, goal: str = "route", timing: str | None = None,
+             indices=None) -> dict:
+    """Plan quality of `checkpoint` on `limit` windows of `data` spread evenly (all if None; or
+    exactly `indices`), towards `goal` (route or human), waypoints timed by `timing` (default:
+    the checkpoint's)."""
+    import dataclasses
+
     planner = RiskMapPlanner.load(checkpoint, seed=seed, goal_variance=goal_variance)
+    if timing is not None:
+        planner.sampler = dataclasses.replace(planner.sampler, timing=timing)
     side = read_sidecar(checkpoint)
     sx, sy = side["maps"]["sigma_x"], side["maps"]["sigma_y"]
     dataset = DemoDataset(data, planner.grid.rows, raster=planner.raster)
     picks = range(len(dataset)) if limit is None else \
         np.unique(np.linspace(0, len(dataset) - 1, limit).astype(int))
-    e = window_errors(planner, dataset, picks, sx, sy)
+    e = window_errors(planner, dataset, picks if indices is None else indices, sx, sy, goal)
 
     def stats(x):
         return {"mean": float(np.mean(x)), "p90": float(np.percentile(x, 90))}

@@ -19,6 +19,15 @@ from riskmap.planner.vi import soft_value_iteration, state_visitation
 from riskmap.sim.plan import Plan
 
 
+def sampler_of(side: dict) -> SamplerConfig:
+    """A checkpoint's sampler: as trained (sidecars from before `timing` existed: `uniform`),
+    with a planning-time `timing` from the sidecar's `planning` section over it."""
+    settings = {"timing": "uniform", **side["sampler"]}
+    if "timing" in side.get("planning", {}):
+        settings["timing"] = side["planning"]["timing"]
+    return SamplerConfig(**settings)
+
+
 class RiskMapPlanner:
     """BEV raster → risk map → soft value iteration → SVF → sampled 12-waypoint trajectory.
 
@@ -58,7 +67,7 @@ class RiskMapPlanner:
             raise InputError(f"goal variance must be > 0 cells², got {variance}")
         planner = cls(model, RasterConfig.from_dict(side["raster"]), GridConfig.from_dict(side["grid"]),
                       side["irl"]["horizon"], variance, side["irl"]["gamma"],
-                      SamplerConfig(**side["sampler"]), seed)
+                      sampler_of(side), seed)
         planner.route_settings = route_settings_of(side)
         return planner
 
@@ -89,7 +98,8 @@ class RiskMapPlanner:
             t["svf"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         waypoints = sample_trajectory(policy[0], start, self.horizon, self.grid, self.sampler,
-                                      seed=(self.seed * 1_000_003 + self._calls) % 2**32)  # any planner seed
+                                      seed=(self.seed * 1_000_003 + self._calls) % 2**32,  # any planner seed
+                                      speed_mps=float(scene.states[scene.ego_index, scene.current_index, 4]))
         t["sampler"] = time.perf_counter() - t0
         self._calls += 1
         t["total"] = sum(t.values())

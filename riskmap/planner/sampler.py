@@ -13,15 +13,63 @@ import numpy as np
 import torch
 
 from rasterize.config import GridConfig
+from rasterize.errors import InputError
 from rasterize.frames import ego_from_grid
 from riskmap.planner.vi import END, MOVES
 
 
+TIMINGS = ("uniform", "kinematic")
+
+
 @dataclass(frozen=True)
 class SamplerConfig:
+    """`timing`: how the chosen path is spread over the 6 s. `uniform`: waypoints evenly spaced
+    in distance (constant speed from the start, whatever the ego's speed now); `kinematic`: the
+    ego's current speed, changed at the one constant acceleration that ends the path at 6 s
+    (at most `max_accel_mps2`; where that would mean reversing, braking to a stop at its end):
+    `kinematic_arc_lengths`. Checkpoints from before `timing` existed plan `uniform`."""
+
     samples: int = 1000
     clusters: int = 10
     waypoints: int = 12
+    timing: str = "kinematic"
+    max_accel_mps2: float = 3.0
+    dt_s: float = 0.5                 # seconds between waypoints
+
+    def __post_init__(self) -> None:
+        if self.timing not in TIMINGS:
+            raise InputError(f"sampler timing {self.timing!r} is unknown; use one of {', '.join(TIMINGS)}")
+
+
+def kinematic_arc_lengths(length_m: float, speed_mps: float, times_s: np.ndarray,
+                          max_accel_mps2: float) -> np.ndarray:
+    """Distances [len(times_s)] along a path of `length_m` at `times_s` (the last is the horizon
+    T) for a vehicle now at `speed_mps`: s(t) = v t + a t² / 2 with a = 2 (L − v T) / T² capped at
+    `max_accel_mps2`; if the speed would turn negative before T, uniform braking to a stop at L
+    (s = v t − v² t² / (4 L) until t = 2 L / v). Never beyond L, never backwards."""
+    v, horizon = max(float(speed_mps), 0.0), float(times_s[-1])
+    if length_m <= 0.0:
+        return np.zeros(len(times_s))
+    accel = min(2.0 * (length_m - v * horizon) / horizon ** 2, max_accel_mps2)
+    if v + accel * horizon >= 0.0:
+        s = v * times_s + 0.5 * accel * times_s ** 2
+    else:
+        s = np.where(times_s < 2.0 * length_m / v, v * times_s - v * v * times_s ** 2 / (4.0 * length_m),
+                     length_m)
+    return np.clip(s, 0.0, length_m)
+
+
+def retime(path_cells: np.ndarray, moves: int, grid: GridConfig, speed_mps: float,
+           config: SamplerConfig) -> np.ndarray:
+    """[config.waypoints, 2] ego-frame waypoints along one cell path [N + 1, 2] (its first
+    `moves` moves) at `kinematic_arc_lengths`."""
+    centres = ego_from_grid(path_cells[: moves + 1], grid)
+    cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(centres, axis=0), axis=1))])
+    times = config.dt_s * np.arange(1, config.waypoints + 1)
+    s = kinematic_arc_lengths(float(cum[-1]), speed_mps, times, config.max_accel_mps2)
+    if len(centres) == 1:
+        return np.repeat(centres, config.waypoints, axis=0)
+    return np.column_stack([np.interp(s, cum, centres[:, 0]), np.interp(s, cum, centres[:, 1])])
 
 
 def sample_paths(policy: torch.Tensor, start: tuple[int, int], horizon: int, samples: int,
@@ -82,9 +130,11 @@ def downsample(paths: np.ndarray, moves: np.ndarray, count: int, grid: GridConfi
 
 
 def sample_trajectory(policy: torch.Tensor, start: tuple[int, int], horizon: int, grid: GridConfig,
-                      config: SamplerConfig = SamplerConfig(), seed: int = 0) -> np.ndarray:
+                      config: SamplerConfig = SamplerConfig(), seed: int = 0,
+                      speed_mps: float | None = None) -> np.ndarray:
     """Waypoints [config.waypoints, 2] in the ego frame: the most central path of the largest
-    cluster of `config.samples` sampled paths. Deterministic given `seed`."""
+    cluster of `config.samples` sampled paths, timed by `config.timing` (`kinematic` needs the
+    ego's `speed_mps`; without it the waypoints are uniform). Deterministic given `seed`."""
     from sklearn.cluster import KMeans
 
     generator = torch.Generator().manual_seed(seed)
@@ -99,7 +149,9 @@ def sample_trajectory(policy: torch.Tensor, start: tuple[int, int], horizon: int
     labels = KMeans(n_clusters=k, n_init=1, random_state=seed).fit_predict(flat) if k > 1 \
         else np.zeros(len(flat), dtype=int)
     largest = np.bincount(labels).argmax()
-    members = flat[labels == largest]
-    centre = members.mean(axis=0)
-    best = members[np.argmin(((members - centre) ** 2).sum(axis=1))]
-    return best.reshape(config.waypoints, 2)
+    members = np.flatnonzero(labels == largest)
+    centre = flat[members].mean(axis=0)
+    best = members[np.argmin(((flat[members] - centre) ** 2).sum(axis=1))]
+    if config.timing == "kinematic" and speed_mps is not None:
+        return retime(paths[best], int(lengths[best]), grid, speed_mps, config)
+    return flat[best].reshape(config.waypoints, 2)

@@ -127,7 +127,8 @@ def _evaluate(model, loader, config: TrainConfig, irl, grid, device) -> dict:
                 if seen >= config.val_ade_windows:
                     break
                 plan = sample_trajectory(step.policy[i].cpu(), tuple(batch["start_cell"][i].tolist()),
-                                         config.horizon, grid, SamplerConfig(), seed=seen)
+                                         config.horizon, grid, SamplerConfig(), seed=seen,
+                                         speed_mps=float(batch["motion"][i, 0, 0, 0]))
                 err = np.linalg.norm(plan - batch["future"][i].cpu().numpy(), axis=1)
                 ade.append(err.mean())
                 fde.append(err[-1])

@@ -51,3 +51,33 @@ def test_waypoints_are_evenly_spaced_in_metres_on_non_square_cells():
     s = 52.0 * np.arange(1, 13) / 12                      # equal arc-length steps of 4.33 m
     expected = np.stack([x0 + np.minimum(s, 48.0), y0 + np.maximum(s - 48.0, 0.0)], axis=1)
     np.testing.assert_allclose(wp, expected, atol=1e-9)
+
+
+def test_kinematic_timing_against_hand_computed_profiles():
+    from riskmap.planner.sampler import kinematic_arc_lengths
+
+    t = 0.5 * np.arange(1, 13)
+    # 10 m/s over a 72 m path in 6 s: a = 2 (72 - 60) / 36 = 2/3 m/s².
+    np.testing.assert_allclose(kinematic_arc_lengths(72.0, 10.0, t, 3.0), 10 * t + t ** 2 / 3, atol=1e-12)
+    # Standing still, 90 m ahead: a would be 5 m/s², capped at 3, so the path is not finished.
+    np.testing.assert_allclose(kinematic_arc_lengths(90.0, 0.0, t, 3.0), 1.5 * t ** 2, atol=1e-12)
+    # 10 m/s and only 20 m: brake uniformly to stop at 20 m (at t = 4 s), then stay.
+    s = kinematic_arc_lengths(20.0, 10.0, t, 3.0)
+    np.testing.assert_allclose(s, np.where(t < 4.0, 10 * t - 100 * t ** 2 / 80, 20.0), atol=1e-12)
+    assert np.all(np.diff(s) >= 0) and s[-1] == 20.0
+    assert not kinematic_arc_lengths(0.0, 5.0, t, 3.0).any()
+
+
+def test_kinematic_waypoints_keep_the_path_and_the_current_speed():
+    policy = _policy()
+    uniform = sample_trajectory(policy, (15, 10), 30, GRID, SamplerConfig(timing="uniform"), seed=3)
+    fast = sample_trajectory(policy, (15, 10), 30, GRID, SamplerConfig(), seed=3, speed_mps=3.0)
+    # Same path (13 m straight ahead), same end; from 3 m/s, slowing at a = 2 (13 - 18) / 36 to
+    # end there at 6 s, where uniform spacing would move 13/12 m every step.
+    np.testing.assert_allclose(fast[-1], uniform[-1])
+    np.testing.assert_allclose(fast[:, 1], -0.5)
+    accel = 2 * (13.0 - 18.0) / 36.0
+    np.testing.assert_allclose(fast[0, 0] - (-5.5), 3.0 * 0.5 + 0.5 * accel * 0.25, atol=1e-9)
+    # No speed given: uniform whatever the setting.
+    np.testing.assert_array_equal(sample_trajectory(policy, (15, 10), 30, GRID, SamplerConfig(), seed=3),
+                                  uniform)
