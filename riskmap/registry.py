@@ -71,9 +71,11 @@ def _plugin(name: str):
 _CACHED: dict = {}
 
 
-def cached_planner(spec: str, seed: int = 0):
-    """`make_planner(spec, seed)`, made once per process: loading a checkpoint costs seconds, and
-    a planner is reset at the start of every episode, so reuse does not change results."""
-    if (spec, seed) not in _CACHED:
-        _CACHED[spec, seed] = make_planner(spec, seed=seed)
-    return _CACHED[spec, seed]
+def cached_planner(spec: str, seed: int = 0, goal_variance: float | None = None):
+    """`make_planner(spec, seed, goal_variance)`, made once per process: loading a checkpoint
+    costs seconds, and a planner is reset at the start of every episode, so reuse does not
+    change results."""
+    key = (spec, seed, goal_variance)
+    if key not in _CACHED:
+        _CACHED[key] = make_planner(spec, seed=seed, goal_variance=goal_variance)
+    return _CACHED[key]

@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from rasterize.errors import InputError
-from riskmap.infra.cli import positive_int
+from riskmap.infra.cli import comma_list, positive_int
 
 
 def _cmd_drive(args: argparse.Namespace) -> int:
@@ -37,12 +37,13 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
             raise InputError("--commonroad evaluates recorded vehicles: drop --env and --episodes")
         evaluate_commonroad(args.commonroad, planners, Path(args.out), seed=args.seed,
                             resume=args.resume, progress=not args.quiet, workers=args.workers,
-                            goal=args.goal or "route", mode=args.mode)
+                            goal=args.goal or "route", mode=args.mode,
+                            goal_variance=args.goal_variance)
         print((Path(args.out) / "table.md").read_text(), end="")
         return 0
-    if args.goal is not None:
-        raise InputError("--goal is for recordings (--commonroad); on simulated scenes the planner "
-                         "follows the route rule")
+    if args.goal is not None or args.goal_variance is not None:
+        raise InputError("--goal and --goal-variance are for recordings (--commonroad); on simulated "
+                         "scenes the planner follows the route rule with its checkpoint's variance")
     if not args.env or not args.episodes:
         raise InputError("evaluate needs --env ENV and --episodes N (or --commonroad FILES)")
     config = EvalConfig(env_id=args.env, planners=planners, episodes=args.episodes, seed=args.seed,
@@ -61,10 +62,11 @@ def _cmd_tune_goal_variance(args: argparse.Namespace) -> int:
     except ValueError:
         raise InputError(f"--candidates {args.candidates!r}: give comma-separated numbers, e.g. 5,2,1") from None
     planning = tune_goal_variance(Path(args.checkpoint), Path(args.data), candidates, args.limit,
-                                  write=not args.dry_run)
-    print(f"chosen goal variance {planning['goal_variance']:g} (lowest mean ADE "
-          f"{min(r['ade_m'] for r in planning['candidates']):.2f} m)"
-          + ("" if args.dry_run else f"; wrote planning.goal_variance to "
+                                  write=not args.dry_run, goal=args.goal, groups=args.groups)
+    key = "goal_variance" if args.goal == "route" else "human_goal_variance"
+    print(f"chosen goal variance {planning[key]:g} (lowest mean ADE "
+          f"{min(r['ade_m'] for r in planning['candidates' if args.goal == 'route' else 'human_candidates']):.2f} m)"
+          + ("" if args.dry_run else f"; wrote planning.{key} to "
              f"{Path(args.checkpoint).with_suffix('.json')}"))
     return 0
 
@@ -94,6 +96,9 @@ def add_parsers(sub) -> None:
     p.add_argument("--goal", choices=("route", "human"), default=None,
                    help="with --commonroad: the route rule's goal (default) or the recorded "
                         "vehicle's own end position (the planner paper's protocol)")
+    p.add_argument("--goal-variance", type=float, default=None,
+                   help="with --commonroad: cells²; planning-time goal variance of risk-map planners "
+                        "(default: the checkpoint's; see tune-goal-variance --goal)")
     p.add_argument("--commonroad", nargs="+", metavar="DIR_OR_FILE",
                    help="evaluate on recorded vehicles of CommonRoad files instead (--mode log or "
                         "reactive)")
@@ -115,5 +120,12 @@ def add_parsers(sub) -> None:
     p.add_argument("--data", required=True, help="held-out windows (not training data)")
     p.add_argument("--candidates", default="5,2,1,0.5", help="goal variances, cells²")
     p.add_argument("--limit", type=positive_int, default=60, help="windows, evenly spread")
+    p.add_argument("--goal", choices=("route", "human"), default="route",
+                   help="plan towards the route rule's goal (planning.goal_variance, what riskmap:PATH "
+                        "plans with) or the human's own end (planning.human_goal_variance, for "
+                        "evaluate --commonroad --goal human --goal-variance)")
+    p.add_argument("--groups", type=comma_list, default=None,
+                   help="recorded data: only windows of these configurations (names or numbers), "
+                        "e.g. the training ones, so the evaluation configurations stay unseen")
     p.add_argument("--dry-run", action="store_true", help="print, do not write the sidecar")
     p.set_defaults(func=_cmd_tune_goal_variance)

@@ -52,7 +52,8 @@ def _traffic(path: Path) -> RecordedTraffic:
     return _TRAFFIC[path]
 
 
-def _planner(spec: str, traffic: RecordedTraffic, vehicle_id: int, seed: int):
+def _planner(spec: str, traffic: RecordedTraffic, vehicle_id: int, seed: int,
+             goal_variance: float | None = None):
     """The planner for one episode. `replay` and `idm` are tied to their recording; any other SPEC
     is made once per process and reused (each episode resets it, so results do not depend on order)."""
     from riskmap.registry import cached_planner
@@ -63,7 +64,7 @@ def _planner(spec: str, traffic: RecordedTraffic, vehicle_id: int, seed: int):
         return RecordedFuturePlanner(traffic, vehicle_id)
     if spec == "idm":
         return RecordedRouteIdmPlanner(traffic, vehicle_id)
-    return cached_planner(spec, seed)
+    return cached_planner(spec, seed, goal_variance)
 
 
 def _episode_path(out: Path, spec: str, scenario: str, vehicle: int) -> Path:
@@ -77,9 +78,10 @@ def _run_episode(task: tuple) -> dict:
     from riskmap.sim.commonroad_replay import ReplayConfig, replay_commonroad_episode
 
     torch.set_num_threads(1)          # workers run side by side
-    spec, path, vehicle, seed, goal, mode, out = task
+    spec, path, vehicle, seed, goal, mode, goal_variance, out = task
     traffic = _traffic(path)
-    result = replay_commonroad_episode(traffic, vehicle, _planner(spec, traffic, vehicle, seed),
+    planner = _planner(spec, traffic, vehicle, seed, goal_variance)
+    result = replay_commonroad_episode(traffic, vehicle, planner,
                                        config=ReplayConfig(goal=goal, mode=mode))
     write_json(_episode_path(out, spec, traffic.name, vehicle), result)
     return result
@@ -121,10 +123,12 @@ def markdown_table(results: dict) -> str:
 
 def evaluate_commonroad(recordings: list[str | Path], planners: tuple[str, ...], out: Path,
                         seed: int = 0, resume: bool = False, progress: bool = True,
-                        workers: int = 1, goal: str = "route", mode: str = "log") -> dict:
+                        workers: int = 1, goal: str = "route", mode: str = "log",
+                        goal_variance: float | None = None) -> dict:
     """Run every planner on every recorded demonstrator (episodes on `workers` processes) towards
     `goal` among others replayed in `mode` (riskmap.sim.commonroad_replay.ReplayConfig: route or
-    human; log or reactive); returns {planner: summary}."""
+    human; log or reactive); `goal_variance` (cells²) overrides risk-map planners' planning-time
+    goal variance. Returns {planner: summary}."""
     from tqdm import tqdm
 
     from riskmap.sim.commonroad_replay import ReplayConfig
@@ -143,12 +147,12 @@ def evaluate_commonroad(recordings: list[str | Path], planners: tuple[str, ...],
     episodes = [(d.path, traffics[d.path].name, int(traffics[d.path].ids[d.agent])) for d in demos]
     for spec in planners:           # a bad SPEC fails here, before anything is written
         if spec not in ("replay", "idm"):       # these two are made per recorded vehicle
-            _planner(spec, None, 0, seed)
+            _planner(spec, None, 0, seed, goal_variance)
     meta = {"recordings": [str(p) for p in files], "planners": list(planners), "seed": seed, "goal": goal,
-            "mode": mode}
+            "mode": mode, **({"goal_variance": goal_variance} if goal_variance is not None else {})}
     claim_out_dir(out, holds="an evaluation", marker="run.json", resume=resume, settings_file="run.json",
                   settings=meta)
-    todo = [(spec, path, vehicle, seed, goal, mode, out) for spec in planners for path, name, vehicle in episodes
+    todo = [(spec, path, vehicle, seed, goal, mode, goal_variance, out) for spec in planners for path, name, vehicle in episodes
             if not (resume and _episode_path(out, spec, name, vehicle).exists())]
     bar = tqdm(total=len(todo), disable=not progress, desc="evaluate recordings")
     for _ in run_parallel(_run_episode, todo, workers):

@@ -96,24 +96,47 @@ def evaluate(checkpoint: Path, data: Path, limit: int | None = None, seed: int =
             "uncertainty_weight": side["irl"]["uncertainty_weight"]}
 
 
+def group_windows(data: Path, groups: tuple[str, ...], limit: int | None) -> list[int]:
+    """Indices of the windows of recorded `groups` (names or configuration numbers), at most
+    `limit` spread evenly."""
+    from riskmap.data.groups import dataset_groups, match_groups
+
+    dataset = DemoDataset(data)
+    chosen_groups = match_groups(dataset, dataset_groups(dataset), groups)
+    chosen = [i for i in range(len(dataset)) if dataset.group_of(i) in chosen_groups]
+    if limit is not None and len(chosen) > limit:
+        chosen = [chosen[i] for i in np.unique(np.linspace(0, len(chosen) - 1, limit).astype(int))]
+    return chosen
+
+
 def tune_goal_variance(checkpoint: Path, data: Path, candidates: tuple[float, ...], limit: int = 60,
-                       write: bool = True, report=print) -> dict:
-    """Evaluate each candidate goal variance (cells²); record the lowest-ADE one in the sidecar's
-    `planning` section unless `write` is False. Returns that section."""
+                       write: bool = True, report=print, goal: str = "route",
+                       groups: tuple[str, ...] | None = None) -> dict:
+    """Evaluate each candidate goal variance (cells²) towards `goal`; record the lowest-ADE one
+    in the sidecar's `planning` section (`goal_variance` for the route rule's goal, which
+    `riskmap:PATH` plans with; `human_goal_variance` for the human's end) unless `write` is
+    False. `groups`: only windows of these recorded configurations. Returns that section."""
     checkpoint = Path(checkpoint)
     weights = checkpoint.with_suffix(".safetensors")
+    indices = group_windows(data, groups, limit) if groups else None
     rows = []
     for variance in candidates:
-        r = evaluate(weights, data, limit, goal_variance=float(variance))
+        r = evaluate(weights, data, limit, goal_variance=float(variance), goal=goal, indices=indices)
         rows.append({"goal_variance": float(variance), "windows": r["windows"],
                      "ade_m": r["ade_m"]["mean"], "fde_m": r["fde_m"]["mean"],
                      "goal_error_m": r["goal_error_m"]["mean"],
                      "end_short_of_demo_m": r["end_short_of_demo_m"]["mean"]})
         report(" ".join(f"{k}={v:.2f}" if isinstance(v, float) else f"{k}={v}" for k, v in rows[-1].items()))
     best = min(rows, key=lambda row: row["ade_m"])
-    planning = {"goal_variance": best["goal_variance"], "chosen_by": "lowest mean ADE",
-                "held_out_data": str(data), "candidates": rows}
+    sidecar = checkpoint.with_suffix(".json")
+    planning = json.loads(sidecar.read_text()).get("planning", {})
+    if goal == "route":
+        planning |= {"goal_variance": best["goal_variance"], "chosen_by": "lowest mean ADE",
+                     "held_out_data": str(data), "groups": list(groups or []), "candidates": rows}
+    else:
+        planning |= {"human_goal_variance": best["goal_variance"], "human_chosen_by": "lowest mean ADE",
+                     "human_data": str(data), "human_groups": list(groups or []),
+                     "human_candidates": rows}
     if write:
-        sidecar = checkpoint.with_suffix(".json")
         write_json(sidecar, {**json.loads(sidecar.read_text()), "planning": planning})
     return planning

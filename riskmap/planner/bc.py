@@ -28,9 +28,9 @@ from torch import nn
 from rasterize.config import GridConfig, RasterConfig
 from rasterize.errors import InputError
 from rasterize.maps import goal_map, route_goal_cell
-from riskmap.infra.checkpoint import route_settings_of
 from rasterize.raster import rasterize_scene
 from rasterize.scene import Scene
+from riskmap.infra.checkpoint import route_settings_of
 from riskmap.planner.model import ModelConfig, RiskMapGenerator
 from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, Plan
 

@@ -17,7 +17,6 @@ from rasterize.errors import InputError
 from rasterize.frames import ego_from_grid
 from riskmap.planner.vi import END, MOVES
 
-
 TIMINGS = ("uniform", "kinematic")
 
 

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import csv
 import math
-import re
 import time
 from dataclasses import asdict
 from pathlib import Path
@@ -21,6 +20,7 @@ from torch.utils.data import DataLoader, Subset
 
 from rasterize.errors import InputError
 from riskmap.data.dataset import DemoDataset, PerturbedEgo
+from riskmap.data.groups import dataset_groups, match_groups, natural_key
 from riskmap.infra.atomic import atomic_write
 from riskmap.infra.checkpoint import read_sidecar, save_checkpoint
 from riskmap.infra.rundir import refuse_unless_resume
@@ -38,25 +38,13 @@ def resolve_device(name: str) -> torch.device:
     return torch.device(name)
 
 
-def _natural_key(name: str) -> list:
-    """Sort key that orders `USA_US101-9` before `USA_US101-10`."""
-    return [int(part) if part.isdigit() else part for part in re.split(r"(\d+)", name)]
-
-
 def _held_out_groups(dataset: DemoDataset, groups: list[str], val_fraction: float,
                      val_groups: tuple[str, ...] | None) -> set[str]:
-    """The groups to validate on: `val_groups` (full names, or configuration numbers matched
-    against the name's `-N` suffix), else the last ⌈val_fraction × groups⌉ in natural order."""
+    """The groups to validate on: `val_groups` (`match_groups`), else the last
+    ⌈val_fraction × groups⌉ in natural order."""
     if not val_groups:
         return set(groups[-max(1, int(math.ceil(val_fraction * len(groups)))):])
-    chosen = set()
-    for wanted in val_groups:
-        hits = [g for g in groups if g == wanted or g.endswith(f"-{wanted}")]
-        if not hits:
-            raise InputError(f"--val-groups {wanted}: dataset {dataset.root} has no such group; its "
-                             f"groups are {', '.join(groups)}")
-        chosen.update(hits)
-    return chosen
+    return match_groups(dataset, groups, val_groups)
 
 
 def split_episodes(dataset: DemoDataset, val_fraction: float,
@@ -67,8 +55,7 @@ def split_episodes(dataset: DemoDataset, val_fraction: float,
     traffic never lands on both sides (`_held_out_groups`). Simulated data: the last episodes.
     """
     episodes = sorted({dataset.episode_of(i) for i in range(len(dataset))})
-    groups = sorted({g for g in (dataset.group_of(i) for i in range(len(dataset))) if g is not None},
-                    key=_natural_key)
+    groups = dataset_groups(dataset)
     if groups:
         if len(groups) < 2:
             raise InputError(f"dataset {dataset.root} holds one recorded group ({groups[0]}); "
@@ -141,7 +128,7 @@ def dataset_sidecar(dataset: DemoDataset, train_idx: list[int], val_idx: list[in
     """What a checkpoint records of its data: source, window counts, held-out groups and the
     settings derived from recorded data (the route rule's speed limit and acceleration, which
     the planner needs in closed loop: `riskmap.sim.commonroad_replay.route_scene_config`)."""
-    groups = sorted({dataset.group_of(i) for i in val_idx} - {None}, key=_natural_key)
+    groups = sorted({dataset.group_of(i) for i in val_idx} - {None}, key=natural_key)
     return {"env_id": dataset.source, "windows": len(dataset), "train_windows": len(train_idx),
             "val_windows": len(val_idx), "val_groups": groups, "derived": dataset.derived,
             "git_commit": dataset.manifest.get("git_commit")}
