@@ -150,8 +150,10 @@ def evaluate_commonroad(recordings: list[str | Path], planners: tuple[str, ...],
             _planner(spec, None, 0, seed, goal_variance)
     meta = {"recordings": [str(p) for p in files], "planners": list(planners), "seed": seed, "goal": goal,
             "mode": mode, **({"goal_variance": goal_variance} if goal_variance is not None else {})}
+    # Records are per planner and episode, so a resumed run may name more (or fewer) planners:
+    # the new ones' episodes are driven, the table covers the planners named now.
     claim_out_dir(out, holds="an evaluation", marker="run.json", resume=resume, settings_file="run.json",
-                  settings=meta)
+                  settings=meta, may_change=("planners",))
     todo = [(spec, path, vehicle, seed, goal, mode, goal_variance, out) for spec in planners for path, name, vehicle in episodes
             if not (resume and _episode_path(out, spec, name, vehicle).exists())]
     bar = tqdm(total=len(todo), disable=not progress, desc="evaluate recordings")

@@ -111,17 +111,20 @@ def group_windows(data: Path, groups: tuple[str, ...], limit: int | None) -> lis
 
 def tune_goal_variance(checkpoint: Path, data: Path, candidates: tuple[float, ...], limit: int = 60,
                        write: bool = True, report=print, goal: str = "route",
-                       groups: tuple[str, ...] | None = None) -> dict:
+                       groups: tuple[str, ...] | None = None, timing: str | None = None) -> dict:
     """Evaluate each candidate goal variance (cells²) towards `goal`; record the lowest-ADE one
     in the sidecar's `planning` section (`goal_variance` for the route rule's goal, which
     `riskmap:PATH` plans with; `human_goal_variance` for the human's end) unless `write` is
-    False. `groups`: only windows of these recorded configurations. Returns that section."""
+    False. `groups`: only windows of these recorded configurations. `timing` (uniform or
+    kinematic: `riskmap.planner.sampler.SamplerConfig`) plans with that waypoint timing and
+    records it as `planning.timing`. Returns that section."""
     checkpoint = Path(checkpoint)
     weights = checkpoint.with_suffix(".safetensors")
     indices = group_windows(data, groups, limit) if groups else None
     rows = []
     for variance in candidates:
-        r = evaluate(weights, data, limit, goal_variance=float(variance), goal=goal, indices=indices)
+        r = evaluate(weights, data, limit, goal_variance=float(variance), goal=goal, indices=indices,
+                     timing=timing)
         rows.append({"goal_variance": float(variance), "windows": r["windows"],
                      "ade_m": r["ade_m"]["mean"], "fde_m": r["fde_m"]["mean"],
                      "goal_error_m": r["goal_error_m"]["mean"],
@@ -137,6 +140,8 @@ def tune_goal_variance(checkpoint: Path, data: Path, candidates: tuple[float, ..
         planning |= {"human_goal_variance": best["goal_variance"], "human_chosen_by": "lowest mean ADE",
                      "human_data": str(data), "human_groups": list(groups or []),
                      "human_candidates": rows}
+    if timing is not None:
+        planning["timing"] = timing
     if write:
         write_json(sidecar, {**json.loads(sidecar.read_text()), "planning": planning})
     return planning

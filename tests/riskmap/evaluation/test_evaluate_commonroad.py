@@ -29,12 +29,17 @@ def test_replay_recovers_the_human_and_a_rerun_resumes(tmp_path, monkeypatch):
     def must_not_drive(*args, **kwargs):
         raise AssertionError("a finished episode was driven again")
 
+    original = replay_module.replay_commonroad_episode
     monkeypatch.setattr(replay_module, "replay_commonroad_episode", must_not_drive)
     assert evaluate_commonroad([FIXTURES], ("replay",), out, resume=True, progress=False) == results
     with pytest.raises(InputError, match="--resume"):
         evaluate_commonroad([FIXTURES], ("replay",), out, progress=False)
     with pytest.raises(InputError, match="other settings"):
-        evaluate_commonroad([FIXTURES], ("replay", "cv"), out, resume=True, progress=False)
+        evaluate_commonroad([FIXTURES], ("replay",), out, resume=True, progress=False, goal="human")
+    # Resuming with one more planner drives only its episodes; the replay records are kept.
+    monkeypatch.setattr(replay_module, "replay_commonroad_episode", original)
+    with_cv = evaluate_commonroad([FIXTURES], ("replay", "cv"), out, resume=True, progress=False)
+    assert with_cv["replay"] == replay and with_cv["cv"]["episodes"] == replay["episodes"]
 
 
 def test_cli_refuses_mixing_recordings_with_simulated_settings(tmp_path, capsys):
