@@ -23,6 +23,7 @@ from riskmap.data.dataset import DemoDataset, PerturbedEgo
 from riskmap.data.groups import dataset_groups, match_groups, natural_key
 from riskmap.infra.atomic import atomic_write
 from riskmap.infra.checkpoint import read_sidecar, save_checkpoint
+from riskmap.infra.config_mapping import to_plain
 from riskmap.infra.rundir import refuse_unless_resume
 from riskmap.planner.irl import demo_negative_log_likelihood, irl_step
 from riskmap.planner.model import ModelConfig, RiskMapGenerator, load_backbone_weights
@@ -194,7 +195,7 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
     start_epoch, best = 0, {"val_ade_m": math.inf}
     if resume and (out / "last.json").exists():
         previous = read_sidecar(out / "last")
-        if previous["train"] | {"epochs": config.epochs} != asdict(config):
+        if previous["train"] | {"epochs": config.epochs} != to_plain(config):
             raise InputError(f"--out {out} was trained with other settings; resume with the same "
                              "flags (only --epochs may change) or choose another --out")
         from safetensors.torch import load_file

@@ -24,6 +24,7 @@ from rasterize.raster import CHANNELS
 from riskmap.data.dataset import DemoDataset
 from riskmap.infra.atomic import atomic_write
 from riskmap.infra.checkpoint import read_sidecar, save_checkpoint
+from riskmap.infra.config_mapping import to_plain
 from riskmap.infra.rundir import refuse_unless_resume
 from riskmap.planner.bc import CHECKPOINT_KIND, BCConfig, BCNet, bc_inputs
 from riskmap.training.config import BaselineTrainConfig
@@ -104,7 +105,7 @@ def train_baseline(config: BaselineTrainConfig, resume: bool = False, progress: 
     start_epoch, best = 0, {"val_ade_m": math.inf}
     if resume and (out / "last.json").exists():
         previous = read_sidecar(out / "last", kind=CHECKPOINT_KIND)
-        if previous["train"] | {"epochs": config.epochs} != asdict(config):
+        if previous["train"] | {"epochs": config.epochs} != to_plain(config):
             raise InputError(f"--out {out} was trained with other settings; resume with the same "
                              "flags (only --epochs may change) or choose another --out")
         from safetensors.torch import load_file

@@ -73,3 +73,12 @@ def test_tuning_per_goal_on_training_configurations(recorded_run, tmp_path, caps
     assert main(["tune-goal-variance", "--checkpoint", str(checkpoint), "--data", str(data),
                  "--groups", "9", "--candidates", "2", "--dry-run"]) == 2
     assert "no such group" in capsys.readouterr().err
+
+
+def test_a_run_with_held_out_configurations_resumes(recorded_run, tmp_path):
+    data, _ = recorded_run
+    settings = dict(data=str(data), out=str(tmp_path / "run"), resolution=25, batch_size=4,
+                    max_windows=8, val_ade_windows=2, lr=1e-3, val_groups=("5",))
+    train(TrainConfig(epochs=1, **settings), progress=False)
+    train(TrainConfig(epochs=2, **settings), resume=True, progress=False)   # JSON lists vs tuples
+    assert json.loads((tmp_path / "run" / "last.json").read_text())["epoch"] == 1
