@@ -63,7 +63,8 @@ def _cmd_tune_goal_variance(args: argparse.Namespace) -> int:
         raise InputError(f"--candidates {args.candidates!r}: give comma-separated numbers, e.g. 5,2,1") from None
     planning = tune_goal_variance(Path(args.checkpoint), Path(args.data), candidates, args.limit,
                                   write=not args.dry_run, goal=args.goal, groups=args.groups,
-                                  timing=args.timing)
+                                  timing=args.timing,
+                                  keep_gap=None if args.keep_gap is None else args.keep_gap == "on")
     key = "goal_variance" if args.goal == "route" else "human_goal_variance"
     print(f"chosen goal variance {planning[key]:g} (lowest mean ADE "
           f"{min(r['ade_m'] for r in planning['candidates' if args.goal == 'route' else 'human_candidates']):.2f} m)"
@@ -131,5 +132,8 @@ def add_parsers(sub) -> None:
     p.add_argument("--timing", choices=("uniform", "kinematic"), default=None,
                    help="plan with this waypoint timing and record it in the sidecar (default: the "
                         "checkpoint's)")
+    p.add_argument("--keep-gap", choices=("on", "off"), default=None,
+                   help="plan with gap keeping behind vehicles on the path on or off, and record it "
+                        "(default: the checkpoint's)")
     p.add_argument("--dry-run", action="store_true", help="print, do not write the sidecar")
     p.set_defaults(func=_cmd_tune_goal_variance)

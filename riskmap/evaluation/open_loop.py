@@ -69,15 +69,15 @@ def window_errors(planner: RiskMapPlanner, dataset: DemoDataset, indices, sigma_
 
 def evaluate(checkpoint: Path, data: Path, limit: int | None = None, seed: int = 0,
              goal_variance: float | None = None, goal: str = "route", timing: str | None = None,
-             indices=None) -> dict:
+             indices=None, keep_gap: bool | None = None) -> dict:
     """Plan quality of `checkpoint` on `limit` windows of `data` spread evenly (all if None; or
     exactly `indices`), towards `goal` (route or human), waypoints timed by `timing` (default:
     the checkpoint's)."""
     import dataclasses
 
     planner = RiskMapPlanner.load(checkpoint, seed=seed, goal_variance=goal_variance)
-    if timing is not None:
-        planner.sampler = dataclasses.replace(planner.sampler, timing=timing)
+    changes = {k: v for k, v in (("timing", timing), ("keep_gap", keep_gap)) if v is not None}
+    planner.sampler = dataclasses.replace(planner.sampler, **changes)
     side = read_sidecar(checkpoint)
     sx, sy = side["maps"]["sigma_x"], side["maps"]["sigma_y"]
     dataset = DemoDataset(data, planner.grid.rows, raster=planner.raster)
@@ -111,20 +111,22 @@ def group_windows(data: Path, groups: tuple[str, ...], limit: int | None) -> lis
 
 def tune_goal_variance(checkpoint: Path, data: Path, candidates: tuple[float, ...], limit: int = 60,
                        write: bool = True, report=print, goal: str = "route",
-                       groups: tuple[str, ...] | None = None, timing: str | None = None) -> dict:
+                       groups: tuple[str, ...] | None = None, timing: str | None = None,
+                       keep_gap: bool | None = None) -> dict:
     """Evaluate each candidate goal variance (cells²) towards `goal`; record the lowest-ADE one
     in the sidecar's `planning` section (`goal_variance` for the route rule's goal, which
     `riskmap:PATH` plans with; `human_goal_variance` for the human's end) unless `write` is
     False. `groups`: only windows of these recorded configurations. `timing` (uniform or
     kinematic: `riskmap.planner.sampler.SamplerConfig`) plans with that waypoint timing and
-    records it as `planning.timing`. Returns that section."""
+    records it as `planning.timing`; `keep_gap` likewise (`riskmap.planner.gap_keeping`).
+    Returns that section."""
     checkpoint = Path(checkpoint)
     weights = checkpoint.with_suffix(".safetensors")
     indices = group_windows(data, groups, limit) if groups else None
     rows = []
     for variance in candidates:
         r = evaluate(weights, data, limit, goal_variance=float(variance), goal=goal, indices=indices,
-                     timing=timing)
+                     timing=timing, keep_gap=keep_gap)
         rows.append({"goal_variance": float(variance), "windows": r["windows"],
                      "ade_m": r["ade_m"]["mean"], "fde_m": r["fde_m"]["mean"],
                      "goal_error_m": r["goal_error_m"]["mean"],
@@ -142,6 +144,8 @@ def tune_goal_variance(checkpoint: Path, data: Path, candidates: tuple[float, ..
                      "human_candidates": rows}
     if timing is not None:
         planning["timing"] = timing
+    if keep_gap is not None:
+        planning["keep_gap"] = keep_gap
     if write:
         write_json(sidecar, {**json.loads(sidecar.read_text()), "planning": planning})
     return planning

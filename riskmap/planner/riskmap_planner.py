@@ -13,6 +13,7 @@ from rasterize.maps import goal_map, motion_features, route_goal_cell, start_cel
 from rasterize.raster import rasterize_scene
 from rasterize.scene import Scene
 from riskmap.infra.checkpoint import route_settings_of
+from riskmap.planner.gap_keeping import keep_gap
 from riskmap.planner.irl import goal_log_map
 from riskmap.planner.sampler import SamplerConfig, sample_trajectory
 from riskmap.planner.vi import soft_value_iteration, state_visitation
@@ -20,11 +21,13 @@ from riskmap.sim.plan import Plan
 
 
 def sampler_of(side: dict) -> SamplerConfig:
-    """A checkpoint's sampler: as trained (sidecars from before `timing` existed: `uniform`),
-    with a planning-time `timing` from the sidecar's `planning` section over it."""
-    settings = {"timing": "uniform", **side["sampler"]}
-    if "timing" in side.get("planning", {}):
-        settings["timing"] = side["planning"]["timing"]
+    """A checkpoint's sampler: as trained (sidecars from before `timing` and `keep_gap` existed:
+    uniform, no gap keeping), with a planning-time `timing` or `keep_gap` from the sidecar's
+    `planning` section over it."""
+    settings = {"timing": "uniform", "keep_gap": False, **side["sampler"]}
+    for key in ("timing", "keep_gap"):
+        if key in side.get("planning", {}):
+            settings[key] = side["planning"][key]
     return SamplerConfig(**settings)
 
 
@@ -100,6 +103,8 @@ class RiskMapPlanner:
         waypoints = sample_trajectory(policy[0], start, self.horizon, self.grid, self.sampler,
                                       seed=(self.seed * 1_000_003 + self._calls) % 2**32,  # any planner seed
                                       speed_mps=float(scene.states[scene.ego_index, scene.current_index, 4]))
+        if self.sampler.keep_gap:
+            waypoints = keep_gap(waypoints, scene, self.sampler.dt_s)
         t["sampler"] = time.perf_counter() - t0
         self._calls += 1
         t["total"] = sum(t.values())

@@ -34,6 +34,7 @@ class SamplerConfig:
     timing: str = "kinematic"
     max_accel_mps2: float = 3.0
     dt_s: float = 0.5                 # seconds between waypoints
+    keep_gap: bool = True             # re-time behind vehicles on the path (`gap_keeping`)
 
     def __post_init__(self) -> None:
         if self.timing not in TIMINGS:

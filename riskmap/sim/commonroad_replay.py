@@ -105,16 +105,22 @@ class RecordedFuturePlanner:
 
     def plan(self, scene: Scene) -> Plan:
         times = scene.time_s + PLAN_DT_S * np.arange(0, PLAN_STEPS + 1)
-        _, last = self.traffic.span(self.agent)
-        end = last * self.traffic.dt_s
-        states, valid = self.traffic.resample(np.array([self.agent]), np.minimum(times, end))
-        if not valid[0, 0]:
-            raise InputError(f"replay: vehicle {self.traffic.ids[self.agent]} is not recorded at "
-                             f"{scene.time_s:g} s")
-        xy = states[0, :, :2] + np.maximum(times - end, 0.0)[:, None] * (
-            states[0, -1, 4] * states[0, -1, 2:4])
-        heading = float(np.arctan2(states[0, 0, 3], states[0, 0, 2]))
+        xy, heading = recorded_positions(self.traffic, self.agent, times)
         return Plan(ego_from_world(xy[1:], xy[0], heading))
+
+
+def recorded_positions(traffic: RecordedTraffic, agent: int, times_s: np.ndarray) -> tuple[np.ndarray, float]:
+    """World positions [len(times_s), 2] of a recorded vehicle at increasing `times_s` (past the
+    end of its record: extrapolated at its last speed and heading) and its heading (rad) at the
+    first time, which must lie inside the record."""
+    _, last = traffic.span(agent)
+    end = last * traffic.dt_s
+    states, valid = traffic.resample(np.array([agent]), np.minimum(times_s, end))
+    if not valid[0, 0]:
+        raise InputError(f"vehicle {traffic.ids[agent]} is not recorded at {times_s[0]:g} s")
+    xy = states[0, :, :2] + np.maximum(times_s - end, 0.0)[:, None] * (
+        states[0, -1, 4] * states[0, -1, 2:4])
+    return xy, float(np.arctan2(states[0, 0, 3], states[0, 0, 2]))
 
 
 def _ego_scene(traffic: RecordedTraffic, ego: int, track_t: list[float], track: list[np.ndarray],
@@ -181,8 +187,6 @@ class CommonRoadWorld:
         self.crashed = self.off_network = False
         self.collision: dict | None = None
         self._gaps: dict[float, list] = {}        # radius -> this step's (gap, agent, xy) near
-        end, _ = traffic.resample(np.array([ego]), np.array([traffic.span(ego)[1] * traffic.dt_s]))
-        self.human_end_xy = end[0, 0, :2]          # where the recorded vehicle's record ends
 
     def _span(self, start_s: float | None, duration_s: float | None) -> tuple[float, int]:
         first, last = self.traffic.span(self.ego_index)
@@ -222,12 +226,17 @@ class CommonRoadWorld:
         """The planner's scene now; its history is `scene_config`'s, as for collected windows.
 
         With `config.goal == "human"` the route is the straight line from the ego to where the
-        recorded vehicle's record ends, so the route rule's goal (the last route point inside the
-        grid) is the human's end position, or the grid edge towards it."""
+        recorded vehicle is at the end of the plan's horizon (6 s from now; past the end of its
+        record, extrapolated at its last speed and heading), so the route rule's goal (the last
+        route point inside the grid) is the human's position then, as for a training window with
+        the demonstration's goal. A goal fixed at the record's end would ask every later replan to
+        take 6 s for what the human did in less, and the ego would trail the human to the end."""
         scene = _ego_scene(self.traffic, self.ego_index, self.track_t, self.track, self.time_s,
                            self.lanes, self.scene_config, self.others_at)
         if self.config.goal == "human":
-            line = np.linspace(self.track[-1][:2], self.human_end_xy, 200)
+            target, _ = recorded_positions(self.traffic, self.ego_index,
+                                           np.array([self.start, self.time_s + PLAN_STEPS * PLAN_DT_S]))
+            line = np.linspace(self.track[-1][:2], target[-1], 200)
             scene = dataclasses.replace(scene, route_xy=line)
         return scene
 

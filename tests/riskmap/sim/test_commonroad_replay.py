@@ -115,26 +115,35 @@ def test_bad_input_is_an_input_error(traffic):
         replay_commonroad_episode(RECORDING.with_name("none.xml"), 475, ConstantVelocityPlanner())
 
 
-def test_the_human_goal_is_the_recorded_vehicles_own_end(traffic):
+def test_the_human_goal_is_where_the_recorded_vehicle_is_at_the_horizon(traffic):
     from rasterize.config import FAMILY_EXTENTS, GridConfig
     from rasterize.frames import ego_from_grid, ego_from_world, ego_pose
     from rasterize.maps import route_goal_cell
     from riskmap.sim.commonroad_replay import ReplayConfig
 
     vehicle = 475
+    agent = traffic.index_of(vehicle)
     world = CommonRoadWorld(traffic, vehicle, config=ReplayConfig(goal="human"))
     scene = world.scene(2.0)
     grid = GridConfig(FAMILY_EXTENTS["highway"], 50, 50)
-    end_ego = ego_from_world(world.human_end_xy[None], *ego_pose(scene))[0]
+    there, _ = traffic.resample(np.array([agent]), np.array([world.time_s + 6.0]))   # inside the record
+    end_ego = ego_from_world(there[0, :, :2], *ego_pose(scene))[0]
     route_ego = ego_from_world(scene.route_xy, *ego_pose(scene))
-    # the route runs straight from the ego to the end of the vehicle's record
+    # the route runs straight from the ego to where the human is 6 s from now
     np.testing.assert_allclose(route_ego[0], [0.0, 0.0], atol=1e-9)
     np.testing.assert_allclose(route_ego[-1], end_ego, atol=1e-9)
-    # inside the grid, the planner's goal cell is the one holding the human's end
+    # inside the grid, the planner's goal cell is the one holding that position
     goal = ego_from_grid(route_goal_cell(scene, grid), grid)
     assert abs(goal[0] - end_ego[0]) <= 240.0 / 50 and abs(goal[1] - end_ego[1]) <= 40.0 / 50
     route = CommonRoadWorld(traffic, vehicle).scene(2.0)
-    assert not np.allclose(route.route_xy[-1], world.human_end_xy)   # the route rule's goal differs
+    assert not np.allclose(route.route_xy[-1], scene.route_xy[-1])   # the route rule's goal differs
+    # Near the end of the record the human is extrapolated at its last speed and heading.
+    first, last = traffic.span(agent)
+    late = CommonRoadWorld(traffic, vehicle, start_s=last * traffic.dt_s - 1.0,
+                           config=ReplayConfig(goal="human"))
+    final = traffic.states[agent, last]
+    expected = final[:2] + 5.0 * final[4] * final[2:4]
+    np.testing.assert_allclose(late.scene(2.0).route_xy[-1], expected, atol=1e-6)
     with pytest.raises(InputError, match="--goal 'nope'"):
         ReplayConfig(goal="nope")
 
