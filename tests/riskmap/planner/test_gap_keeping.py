@@ -7,6 +7,7 @@ from rasterize.scene import Scene
 from riskmap.planner.gap_keeping import GapKeepingConfig, keep_gap
 from tests.scenes import state
 
+WIDE = GapKeepingConfig(standstill_m=2.0, headway_s=1.0)               # round numbers
 STRAIGHT = np.column_stack([5.0 * np.arange(1, 13), np.zeros(12)])   # 10 m/s for 6 s
 
 
@@ -18,7 +19,7 @@ def _scene(other: list[float]) -> Scene:
 
 
 def test_a_standing_vehicle_ahead_caps_the_plan_short_of_it():
-    out = keep_gap(STRAIGHT, _scene(state(30.0, 0.0, 0.0, 0.0)), 0.5)
+    out = keep_gap(STRAIGHT, _scene(state(30.0, 0.0, 0.0, 0.0)), 0.5, WIDE)
     # 30 m ahead, less half the two lengths (5 m) and the 2 m standstill gap: stop at 23 m.
     np.testing.assert_allclose(out[:, 0], np.minimum(5.0 * np.arange(1, 13), 23.0), atol=1e-9)
     np.testing.assert_allclose(out[:, 1], 0.0, atol=1e-9)
@@ -26,7 +27,7 @@ def test_a_standing_vehicle_ahead_caps_the_plan_short_of_it():
 
 def test_a_slower_leader_is_followed_at_its_gap_and_headway():
     # Leader 20 m ahead at 4 m/s: at t it is at 20 + 4t; cap = 20 + 4t - 5 - 2 - 1.0 * 4 = 9 + 4t.
-    out = keep_gap(STRAIGHT, _scene(state(20.0, 0.0, 0.0, 4.0)), 0.5)
+    out = keep_gap(STRAIGHT, _scene(state(20.0, 0.0, 0.0, 4.0)), 0.5, WIDE)
     t = 0.5 * np.arange(1, 13)
     cap = 9.0 + 4.0 * t
     np.testing.assert_allclose(out[:, 0], np.minimum(10.0 * t, cap), atol=1e-9)
@@ -47,7 +48,12 @@ def test_a_vehicle_cutting_in_later_caps_from_then_on():
     # of it) from t = 1 to 3 s, standing still along x. Up to 3 s the ego stays 7 m short of it;
     # then it goes on at the planned 10 m/s, never jumping ahead.
     crossing = state(25.0, 3.7, -np.pi / 2, 1.85)
-    out = keep_gap(STRAIGHT, _scene(crossing), 0.5, GapKeepingConfig())
+    out = keep_gap(STRAIGHT, _scene(crossing), 0.5, WIDE)
     t = 0.5 * np.arange(1, 13)
     expected = np.concatenate([np.minimum(10.0 * t[:6], 18.0), 18.0 + 5.0 * np.arange(1, 7)])
     np.testing.assert_allclose(out[:, 0], expected, atol=1e-9)
+
+
+def test_the_default_gap_is_a_metre_behind_the_prediction():
+    out = keep_gap(STRAIGHT, _scene(state(30.0, 0.0, 0.0, 0.0)), 0.5)
+    np.testing.assert_allclose(out[:, 0], np.minimum(5.0 * np.arange(1, 13), 24.0), atol=1e-9)
