@@ -201,3 +201,13 @@ class PerturbedEgo(_TorchDataset):
             scene = scene.with_ego_perturbed(rng.uniform(-self.max_heading, self.max_heading),
                                              rng.uniform(-self.max_lateral, self.max_lateral))
         return self.base.sample(scene)
+
+
+def with_human_goal(scene):
+    """`scene` with its route replaced by the straight line to where the human was at the end of
+    the recorded future, so the planner's goal is the human's (the `--goal human` protocol, as
+    `riskmap.sim.commonroad_replay.CommonRoadWorld.scene` does in closed loop)."""
+    import dataclasses
+
+    end = scene.ego_future_xy()[-1]
+    return dataclasses.replace(scene, route_xy=np.linspace(scene.ego_state()[:2], end, 200))

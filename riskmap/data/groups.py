@@ -32,3 +32,9 @@ def dataset_groups(dataset: DemoDataset) -> list[str]:
     """The recorded groups of a dataset in natural order (empty for simulated data)."""
     return sorted({g for g in map(dataset.group_of, range(len(dataset))) if g is not None},
                   key=natural_key)
+
+
+def windows_of_groups(dataset: DemoDataset, groups: tuple[str, ...]) -> list[int]:
+    """Indices of the dataset's windows in the recorded `groups` (`match_groups`)."""
+    chosen = match_groups(dataset, dataset_groups(dataset), groups)
+    return [i for i in range(len(dataset)) if dataset.group_of(i) in chosen]

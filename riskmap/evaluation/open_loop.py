@@ -23,20 +23,11 @@ import numpy as np
 
 from rasterize.frames import ego_from_grid, ego_from_world, ego_pose
 from rasterize.maps import uncertainty_map
-from riskmap.data.dataset import DemoDataset
+from riskmap.data.dataset import DemoDataset, with_human_goal
+from riskmap.data.groups import windows_of_groups
 from riskmap.infra.atomic import write_json
 from riskmap.infra.checkpoint import read_sidecar
 from riskmap.planner.riskmap_planner import RiskMapPlanner
-
-
-def with_human_goal(scene):
-    """`scene` with its route replaced by the straight line to where the human was at the end of
-    the recorded future, so the planner's goal is the human's (the `--goal human` protocol, as
-    `riskmap.sim.commonroad_replay.CommonRoadWorld.scene` does in closed loop)."""
-    import dataclasses
-
-    end = scene.ego_future_xy()[-1]
-    return dataclasses.replace(scene, route_xy=np.linspace(scene.ego_state()[:2], end, 200))
 
 
 def window_errors(planner: RiskMapPlanner, dataset: DemoDataset, indices, sigma_x: float,
@@ -99,11 +90,7 @@ def evaluate(checkpoint: Path, data: Path, limit: int | None = None, seed: int =
 def group_windows(data: Path, groups: tuple[str, ...], limit: int | None) -> list[int]:
     """Indices of the windows of recorded `groups` (names or configuration numbers), at most
     `limit` spread evenly."""
-    from riskmap.data.groups import dataset_groups, match_groups
-
-    dataset = DemoDataset(data)
-    chosen_groups = match_groups(dataset, dataset_groups(dataset), groups)
-    chosen = [i for i in range(len(dataset)) if dataset.group_of(i) in chosen_groups]
+    chosen = windows_of_groups(DemoDataset(data), groups)
     if limit is not None and len(chosen) > limit:
         chosen = [chosen[i] for i in np.unique(np.linspace(0, len(chosen) - 1, limit).astype(int))]
     return chosen

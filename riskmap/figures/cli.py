@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from riskmap.infra.cli import positive_int
+from riskmap.infra.cli import comma_list, positive_int
 
 
 def _cmd_figures_scenes(args: argparse.Namespace) -> int:
@@ -20,7 +20,7 @@ def _cmd_figures_plans(args: argparse.Namespace) -> int:
     from riskmap.figures.panels import plan_figures
 
     paths = plan_figures(Path(args.checkpoint), Path(args.data), Path(args.out), args.count,
-                         args.seed)
+                         args.seed, groups=args.groups, goal=args.goal, goal_variance=args.goal_variance)
     print(f"wrote {len(paths)} PNGs to {args.out}")
     return 0
 
@@ -39,4 +39,10 @@ def add_parsers(sub) -> None:
     q.add_argument("--out", required=True, help="directory for the PNGs")
     q.add_argument("--count", type=positive_int, default=6)
     q.add_argument("--seed", type=int, default=0)
+    q.add_argument("--groups", type=comma_list, default=None,
+                   help="recorded data: only windows of these configurations (names or numbers)")
+    q.add_argument("--goal", choices=("route", "human"), default="route",
+                   help="plan towards the route rule's goal or the human's end (as evaluate --goal)")
+    q.add_argument("--goal-variance", type=float, default=None,
+                   help="cells²; planning-time goal variance (default: the checkpoint's)")
     q.set_defaults(func=_cmd_figures_plans)

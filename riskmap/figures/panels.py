@@ -155,22 +155,28 @@ def save_plan_panels(scene: Scene, plan, config: RasterConfig, grid, path: Path,
     return _save(fig, path)
 
 
-def plan_figures(checkpoint: Path, data: Path, out: Path, count: int, seed: int = 0) -> list[Path]:
-    """Fig. 2-style panels of `count` windows spread over a dataset, planned by a checkpoint."""
-    from riskmap.data.dataset import DemoDataset
+def plan_figures(checkpoint: Path, data: Path, out: Path, count: int, seed: int = 0,
+                 groups: tuple[str, ...] | None = None, goal: str = "route",
+                 goal_variance: float | None = None) -> list[Path]:
+    """Fig. 2-style panels of `count` windows spread over a dataset (or over its recorded
+    `groups`), planned by a checkpoint towards the route rule's goal or the human's end."""
+    from riskmap.data.dataset import DemoDataset, with_human_goal
+    from riskmap.data.groups import windows_of_groups
     from riskmap.planner.riskmap_planner import RiskMapPlanner
 
-    planner = RiskMapPlanner.load(checkpoint, seed=seed)
+    planner = RiskMapPlanner.load(checkpoint, seed=seed, goal_variance=goal_variance)
     dataset = DemoDataset(data, planner.grid.rows, raster=planner.raster)
-    picks = np.unique(np.linspace(0, len(dataset) - 1, min(count, len(dataset))).astype(int))
+    pool = windows_of_groups(dataset, groups) if groups else list(range(len(dataset)))
+    picks = [pool[k] for k in np.unique(np.linspace(0, len(pool) - 1, min(count, len(pool))).astype(int))]
     paths = []
     for i in picks:
         scene = dataset.scene(int(i))
-        plan = planner.plan(scene)
+        plan = planner.plan(with_human_goal(scene) if goal == "human" else scene)
         origin, heading = ego_pose(scene)
         demo = ego_from_world(scene.ego_future_xy(), origin, heading)
         ade = float(np.linalg.norm(plan.waypoints - demo, axis=1).mean())
-        title = (f"{dataset.source} window {i}: ego {scene.ego_state()[4]:.1f} m/s, "
+        where = dataset.group_of(int(i)) or dataset.source
+        title = (f"{where} window {i}, {goal} goal: ego {scene.ego_state()[4]:.1f} m/s, "
                  f"ADE {ade:.1f} m, plan {1000 * plan.timings_s['total']:.0f} ms")
         paths.append(save_plan_panels(scene, plan, planner.raster, planner.grid,
                                       Path(out) / f"plan_{i:05d}.png", title))
