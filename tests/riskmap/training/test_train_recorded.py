@@ -82,3 +82,13 @@ def test_a_run_with_held_out_configurations_resumes(recorded_run, tmp_path):
     train(TrainConfig(epochs=1, **settings), progress=False)
     train(TrainConfig(epochs=2, **settings), resume=True, progress=False)   # JSON lists vs tuples
     assert json.loads((tmp_path / "run" / "last.json").read_text())["epoch"] == 1
+
+
+def test_panels_of_held_out_configurations_towards_the_human_goal(recorded_run, tmp_path):
+    data, checkpoint = recorded_run
+    out = tmp_path / "fig"
+    assert main(["figures", "plans", "--checkpoint", str(checkpoint), "--data", str(data),
+                 "--out", str(out), "--count", "2", "--groups", "5", "--goal", "human"]) == 0
+    # Configuration 5 holds the second half of the windows (18 of 36).
+    names = sorted(p.name for p in out.glob("plan_*.png"))
+    assert len(names) == 2 and all(int(n[5:10]) >= 18 for n in names)
