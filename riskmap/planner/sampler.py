@@ -14,7 +14,7 @@ import torch
 
 from rasterize.config import GridConfig
 from rasterize.errors import InputError
-from rasterize.frames import ego_from_grid
+from rasterize.frames import ego_from_grid, grid_from_ego
 from riskmap.planner.vi import END, MOVES
 
 TIMINGS = ("uniform", "kinematic")
@@ -62,8 +62,14 @@ def kinematic_arc_lengths(length_m: float, speed_mps: float, times_s: np.ndarray
 def retime(path_cells: np.ndarray, moves: int, grid: GridConfig, speed_mps: float,
            config: SamplerConfig) -> np.ndarray:
     """[config.waypoints, 2] ego-frame waypoints along one cell path [N + 1, 2] (its first
-    `moves` moves) at `kinematic_arc_lengths`."""
+    `moves` moves) at `kinematic_arc_lengths`.
+
+    The path starts at the ego itself (the origin), not at its cell's centre: that centre lies up
+    to half a cell away (0.6 m ahead on the US-101 grid), and a plan that starts there asks a
+    standing ego to creep that far at every replan."""
     centres = ego_from_grid(path_cells[: moves + 1], grid)
+    if tuple(grid_from_ego(np.zeros(2), grid)) == tuple(path_cells[0]):
+        centres[0] = 0.0            # the path starts in the ego's cell: start at the ego
     cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(centres, axis=0), axis=1))])
     times = config.dt_s * np.arange(1, config.waypoints + 1)
     s = kinematic_arc_lengths(float(cum[-1]), speed_mps, times, config.max_accel_mps2)

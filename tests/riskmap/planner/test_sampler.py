@@ -81,3 +81,19 @@ def test_kinematic_waypoints_keep_the_path_and_the_current_speed():
     # No speed given: uniform whatever the setting.
     np.testing.assert_array_equal(sample_trajectory(policy, (15, 10), 30, GRID, SamplerConfig(), seed=3),
                                   uniform)
+
+
+def test_kinematic_waypoints_start_at_the_ego_not_at_its_cell_centre():
+    from riskmap.planner.sampler import retime
+
+    grid = GridConfig(Extent(150.0, 30.0, 15.0, 15.0), rows=50, cols=50)   # US-101: 3.6 x 0.6 m
+    start = np.array([[41, 25]])                     # the ego's cell; its centre is 0.6 m ahead
+    stay = retime(start, 0, grid, 0.0, SamplerConfig())
+    np.testing.assert_array_equal(stay, np.zeros((12, 2)))     # a standing plan does not creep
+    ahead = retime(np.array([[41, 25], [40, 25], [39, 25]]), 2, grid, 0.0, SamplerConfig())
+    # From the ego to the next cell's centre (4.2 m on, 0.3 m right), one cell more: reached at
+    # 6 s from standstill with a = 2 L / 36.
+    first = np.hypot(4.2, 0.3)
+    accel = 2 * (first + 3.6) / 36
+    np.testing.assert_allclose(ahead[-1], [7.8, -0.3], atol=1e-9)
+    np.testing.assert_allclose(ahead[0], 0.5 * accel * 0.25 * np.array([4.2, -0.3]) / first, atol=1e-9)
