@@ -59,7 +59,7 @@ def main() -> None:
     headways = [float(h) for h in args.headways.split(",")]
     tasks = [(args.checkpoint, args.goal_variance, h, str(d.path), int(traffics[d.path].ids[d.agent]))
              for h in headways for d in demos]
-    rows = list(run_parallel(_episode, tasks, args.workers))
+    rows = [result for _, result in run_parallel(_episode, tasks, args.workers)]
     summary = {}
     for h in headways:
         mine = [r for r in rows if r["headway_s"] == h]
