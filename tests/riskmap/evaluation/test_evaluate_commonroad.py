@@ -63,11 +63,13 @@ def test_workers_give_the_same_records_and_bad_input_leaves_nothing(tmp_path):
     assert not never.exists()
 
 
-def test_goal_is_for_recordings_only(tmp_path, capsys):
-    assert main(["evaluate", "--planners", "cv", "--env", "highway-v0", "--episodes", "1", "--goal",
-                 "human", "--out", str(tmp_path / "x")]) == 2
+@pytest.mark.parametrize("option", [["--goal", "human"], ["--goal-variance", "0.5"]])
+def test_goal_is_for_recordings_only(tmp_path, capsys, option):
+    assert main(["evaluate", "--planners", "cv", "--env", "highway-v0", "--episodes", "1", *option,
+                 "--out", str(tmp_path / "x")]) == 2
     err = capsys.readouterr().err.strip()
-    assert "--goal is for recordings" in err and "\n" not in err and not (tmp_path / "x").exists()
+    assert "--goal and --goal-variance are for recordings" in err and "\n" not in err
+    assert not (tmp_path / "x").exists()
 
 
 def test_cli_runs_recordings_in_reactive_mode(tmp_path, capsys):
