@@ -39,8 +39,11 @@ def read_sidecar(path: Path, kind: str = CHECKPOINT_KIND) -> dict:
         data = json.loads(sidecar.read_text())
     except ValueError:
         raise InputError(f"{sidecar} is not valid JSON; the checkpoint is damaged") from None
-    if data.get("kind") != kind:
-        raise InputError(f"{sidecar} is a {data.get('kind')!r} checkpoint, not {kind!r}; pass a "
+    if not isinstance(data, dict) or "kind" not in data:
+        raise InputError(f"{sidecar} is not a checkpoint sidecar (it names no kind); pass the .json "
+                         "that training wrote beside the .safetensors")
+    if data["kind"] != kind:
+        raise InputError(f"{sidecar} is a {data['kind']!r} checkpoint, not {kind!r}; pass a "
                          "checkpoint made for this planner")
     return data
 

@@ -32,6 +32,14 @@ def run_command(prog: str, parser: argparse.ArgumentParser, argv: list[str] | No
         command = getattr(args, "command", None)
         print(f"{prog}{' ' + command if command else ''}: error: {err}", file=sys.stderr)
         return 2
+    except OSError as err:
+        # A path the system refused (missing parent, no permission, read-only or full disk):
+        # one line naming it, not a traceback.
+        command = getattr(args, "command", None)
+        where = f"{err.filename}: " if err.filename else ""
+        print(f"{prog}{' ' + command if command else ''}: error: {where}{err.strerror or err}; "
+              "check that the path exists and that you may write there", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print(f"{prog}: interrupted; finished work is kept, rerun with --resume", file=sys.stderr)
         return 130

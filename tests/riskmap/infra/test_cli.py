@@ -49,3 +49,30 @@ def test_required_renamed_typed_and_help():
 def test_an_unknown_field_is_a_programming_error():
     with pytest.raises(ValueError, match="no field 'nope'"):
         add_config_options(argparse.ArgumentParser(), Example, "nope")
+
+
+def test_a_refused_path_is_one_line_not_a_traceback(tmp_path, capsys):
+    from riskmap.cli import main
+
+    blocked = tmp_path / "file"
+    blocked.write_text("x")                    # a file where a directory's parent should be
+    assert main(["collect", "--env", "highway-v0", "--episodes", "1", "--out",
+                 str(blocked / "data")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("riskmap collect: error: ") and str(blocked / "data") in err
+    assert "\n" not in err and "check that the path exists" in err
+
+
+@pytest.mark.parametrize("content, words", [
+    ('{"config": {}}', "not a checkpoint sidecar"),
+    ("[1, 2]", "not a checkpoint sidecar"),
+    ('{"kind": "bc"}', "is a 'bc' checkpoint, not"),
+])
+def test_a_sidecar_of_another_kind_is_named(tmp_path, content, words):
+    from rasterize.errors import InputError
+    from riskmap.infra.checkpoint import read_sidecar
+
+    (tmp_path / "ck.safetensors").write_bytes(b"")
+    (tmp_path / "ck.json").write_text(content)
+    with pytest.raises(InputError, match=words):
+        read_sidecar(tmp_path / "ck")
