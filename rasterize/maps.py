@@ -135,6 +135,17 @@ def demo_goal_cell(scene: Scene, grid: GridConfig) -> tuple[int, int]:
     return int(r), int(c)
 
 
+def route_goal_point(scene: Scene, grid: GridConfig) -> np.ndarray | None:
+    """The ego-frame point [2] (metres) inside `route_goal_cell`: the last route point inside the
+    grid, or None without a route or with none of it inside."""
+    if scene.route_xy is None:
+        return None
+    origin, heading = ego_pose(scene)
+    points = ego_from_world(scene.route_xy, origin, heading)
+    inside = np.flatnonzero(in_grid(grid_from_ego(points, grid), grid))
+    return points[inside[-1]] if inside.size else None
+
+
 def route_goal_cell(scene: Scene, grid: GridConfig) -> tuple[int, int]:
     """The planner's goal: the last point of the ego's route ahead that lies inside the grid.
 

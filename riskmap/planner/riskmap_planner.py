@@ -9,7 +9,7 @@ import torch
 
 from rasterize.config import GridConfig, RasterConfig
 from rasterize.errors import InputError
-from rasterize.maps import goal_map, motion_features, route_goal_cell, start_cell
+from rasterize.maps import goal_map, motion_features, route_goal_cell, route_goal_point, start_cell
 from rasterize.raster import rasterize_scene
 from rasterize.scene import Scene
 from riskmap.infra.checkpoint import route_settings_of
@@ -102,7 +102,8 @@ class RiskMapPlanner:
         t0 = time.perf_counter()
         waypoints = sample_trajectory(policy[0], start, self.horizon, self.grid, self.sampler,
                                       seed=(self.seed * 1_000_003 + self._calls) % 2**32,  # any planner seed
-                                      speed_mps=float(scene.states[scene.ego_index, scene.current_index, 4]))
+                                      speed_mps=float(scene.states[scene.ego_index, scene.current_index, 4]),
+                                      goal_xy=route_goal_point(scene, self.grid))
         if self.sampler.keep_gap:
             waypoints = keep_gap(waypoints, scene, self.sampler.dt_s)
         t["sampler"] = time.perf_counter() - t0

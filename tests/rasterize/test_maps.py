@@ -98,3 +98,16 @@ def test_motion_features():
     assert np.all(m[0] == 2.0)
     np.testing.assert_allclose(m[1][:, 0], [25 / 40, 15 / 40, 5 / 40, -5 / 40])
     np.testing.assert_allclose(m[2][0], [15 / 40, 5 / 40, -5 / 40, -15 / 40])
+
+
+def test_route_goal_point_lies_in_the_route_goal_cell():
+    from rasterize.frames import grid_from_ego
+    from rasterize.maps import route_goal_cell, route_goal_point
+    from tests.scenes import UNIT_GRID, constant_velocity_scene
+
+    scene = constant_velocity_scene()
+    assert route_goal_point(scene, UNIT_GRID) is None                # no route
+    routed = replace(scene, route_xy=np.array([[0.0, 0.0], [4.3, 0.2], [30.0, 0.0]]))
+    point = route_goal_point(routed, UNIT_GRID)
+    np.testing.assert_allclose(point, [4.3, 0.2], atol=1e-9)       # the last point inside
+    assert tuple(grid_from_ego(point, UNIT_GRID)) == route_goal_cell(routed, UNIT_GRID)

@@ -97,3 +97,15 @@ def test_kinematic_waypoints_start_at_the_ego_not_at_its_cell_centre():
     accel = 2 * (first + 3.6) / 36
     np.testing.assert_allclose(ahead[-1], [7.8, -0.3], atol=1e-9)
     np.testing.assert_allclose(ahead[0], 0.5 * accel * 0.25 * np.array([4.2, -0.3]) / first, atol=1e-9)
+
+
+def test_a_path_into_the_goal_cell_ends_at_the_goal_itself():
+    from riskmap.planner.sampler import retime
+
+    grid = GridConfig(Extent(150.0, 30.0, 15.0, 15.0), rows=50, cols=50)
+    path = np.array([[41, 25], [40, 25], [39, 25]])
+    goal = np.array([8.9, -0.1])                   # inside cell (39, 25), whose centre is (7.8, -0.3)
+    end = retime(path, 2, grid, 0.0, SamplerConfig(), goal_xy=goal)
+    np.testing.assert_allclose(end[-1], goal, atol=1e-9)
+    elsewhere = retime(path, 2, grid, 0.0, SamplerConfig(), goal_xy=np.array([20.0, 0.0]))
+    np.testing.assert_allclose(elsewhere[-1], [7.8, -0.3], atol=1e-9)   # not the goal's cell
