@@ -2,6 +2,8 @@
 
 An output directory that already holds work is continued only with `--resume`, and only with the
 settings it was started with; otherwise the command stops with one line naming `--out` and the fix.
+A claimed directory has one writer: a second run on it while the first is alive stops at once
+(`lock_out_dir`, an advisory lock on `--out/.lock`).
 What a command compares on resume is its `settings` minus the keys that may change between
 sittings (`may_change`: more episodes, other worker counts). The settings are then written with
 the package version and git commit (`riskmap.infra.provenance`).
@@ -71,6 +73,31 @@ def check_same_settings(out: Path, settings_file: str, settings: dict,
     return previous
 
 
+LOCK_FILE = ".lock"
+_HELD: dict[Path, int] = {}      # out directory -> descriptor of its lock, for this process's life
+
+
+def lock_out_dir(out: Path) -> None:
+    """Become the one writer of `out`: an advisory lock on `out/.lock`, held until this process
+    ends (the system drops it when the process dies, killed or not). Another process holding it
+    makes this an InputError at once; this process may claim its own directory again."""
+    import fcntl
+    import os
+
+    out = Path(out).resolve()
+    if out in _HELD:
+        return
+    out.mkdir(parents=True, exist_ok=True)
+    fd = os.open(out / LOCK_FILE, os.O_CREAT | os.O_RDWR, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        os.close(fd)
+        raise InputError(f"--out {out} is being written by another run right now; wait for it to "
+                         "finish or choose another --out") from None
+    _HELD[out] = fd
+
+
 def claim_out_dir(out: Path, *, holds: str, marker: str | None, resume: bool, settings_file: str,
                   settings: dict, may_change: tuple[str, ...] = (), differs: str = "other settings"
                   ) -> dict | None:
@@ -78,5 +105,6 @@ def claim_out_dir(out: Path, *, holds: str, marker: str | None, resume: bool, se
     `out/settings_file`; returns the previous settings, or None for a fresh run."""
     refuse_unless_resume(out, holds, marker, resume)
     previous = check_same_settings(out, settings_file, settings, may_change, differs) if resume else None
+    lock_out_dir(out)
     write_json(Path(out) / settings_file, {**settings, **provenance()})
     return previous

@@ -46,3 +46,30 @@ def test_unreadable_settings_are_one_line(tmp_path):
     (tmp_path / "run.json").write_text("{not json")
     with pytest.raises(InputError, match="unreadable"):
         _claim(tmp_path, resume=True)
+
+
+def test_a_second_writer_of_the_same_out_stops_at_once(tmp_path):
+    import subprocess
+    import sys
+
+    out = tmp_path / "run"
+    holder = subprocess.Popen(
+        [sys.executable, "-c",
+         "import sys, time; from riskmap.infra.rundir import lock_out_dir; "
+         f"lock_out_dir({str(out)!r}); print('held', flush=True); time.sleep(30)"],
+        stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        with pytest.raises(InputError, match="being written by another run"):
+            claim_out_dir(out, holds="x", marker="run.json", resume=True, settings_file="run.json",
+                          settings={"a": 1})
+        assert not (out / "run.json").exists()
+    finally:
+        holder.kill()
+        holder.wait()
+    # The holder is gone (killed: the system released its lock): the directory can be claimed,
+    # and claimed again by the same process.
+    for _ in range(2):
+        claim_out_dir(out, holds="x", marker="run.json", resume=True, settings_file="run.json",
+                      settings={"a": 1})
+    assert (out / "run.json").exists()
