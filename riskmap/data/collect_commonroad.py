@@ -47,7 +47,7 @@ from rasterize.commonroad import (
 )
 from rasterize.config import FAMILY_EXTENTS, Extent, RasterConfig
 from rasterize.errors import InputError
-from rasterize.frames import ego_from_world
+from rasterize.frames import ego_from_world, ego_pose
 from rasterize.highway import RouteRule
 from riskmap.data.collect import (
     FORMAT_VERSION,
@@ -265,6 +265,14 @@ def _goal_error(traffic: RecordedTraffic, agent: int, step: int, scene: CommonRo
     return ego_from_world(end[None], state[:2], heading)[0] - ego_from_world(route[-1:], state[:2], heading)[0]
 
 
+def window_goal_error(scene) -> np.ndarray:
+    """(along, across) metres from a window's route goal to where its human was at the end of
+    the future, in the human's frame now."""
+    origin, heading = ego_pose(scene)
+    end = ego_from_world(scene.ego_future_xy()[-1:], origin, heading)[0]
+    return end - ego_from_world(scene.route_xy[-1:], origin, heading)[0]
+
+
 def derive_settings(demos: list[Demonstrator], traffics: dict[Path, RecordedTraffic],
                     config: CommonRoadCollectConfig) -> tuple[CommonRoadCollectConfig, dict]:
     """`config` with the extent, route speed limit and route acceleration taken from the
@@ -355,9 +363,7 @@ def _write_shards(demos: list[Demonstrator], traffics: dict[Path, RecordedTraffi
             traffic = traffics[demo.path]
             windows = [traffic.scene(demo.agent, step, scene_config) for step in demo.steps]
             first, last = traffic.span(demo.agent)
-            errors = [_goal_error(traffic, demo.agent, step, scene_config,
-                                  np.flatnonzero(traffic.valid[:, step])).tolist()
-                      for step in demo.steps]
+            errors = [window_goal_error(window).tolist() for window in windows]
             info = {"episode": episode, "file": demo.path.name, "scenario": traffic.name,
                     "group": demo.group, "vehicle_id": int(traffic.ids[demo.agent]),
                     "windows": len(windows), "time_steps": list(demo.steps),

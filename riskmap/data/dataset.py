@@ -194,13 +194,17 @@ class PerturbedEgo(_TorchDataset):
     def __len__(self) -> int:
         return len(self.base)
 
-    def __getitem__(self, index: int) -> dict:
+    def scene(self, index: int) -> Scene:
+        """Window `index`'s scene, perturbed or not as this epoch's draw says."""
         scene = self.base.scene(index)
         rng = np.random.default_rng([self.seed, self.epoch, index])
         if rng.random() < self.probability:
             scene = scene.with_ego_perturbed(rng.uniform(-self.max_heading, self.max_heading),
                                              rng.uniform(-self.max_lateral, self.max_lateral))
-        return self.base.sample(scene)
+        return scene
+
+    def __getitem__(self, index: int) -> dict:
+        return self.base.sample(self.scene(index))
 
 
 def with_human_goal(scene):

@@ -77,13 +77,14 @@ def keep_gap(waypoints: np.ndarray, scene: Scene, dt_s: float,
             continue
         state = scene.states[agent, now]
         position = ego_from_world(state[:2][None], origin, heading)[0]
+        if position[0] <= 0.0:        # only vehicles ahead now: one behind that overtakes is no leader
+            continue
         velocity = ego_from_world((state[:2] + state[4] * state[2:4])[None], origin, heading)[0] - position
         predicted = position[None] + times[:, None] * velocity[None]
         along, off = _project(predicted, line_u, arc_u)
         length, width = scene.sizes[agent]
         on_path = (off <= 0.5 * (ego_wid + width) + config.lateral_margin_m) & (along > 0.0)
-        # Only vehicles ahead of the ego now (a car behind that overtakes is not a leader).
-        if not on_path.any() or position[0] <= 0.0:
+        if not on_path.any():
             continue
         direction = np.diff(line_u, axis=0)
         seg = np.clip(np.searchsorted(arc_u, along, side="right") - 1, 0, len(direction) - 1)

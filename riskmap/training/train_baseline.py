@@ -21,7 +21,7 @@ from torch.utils.data import DataLoader, Dataset, Subset
 from rasterize.errors import InputError
 from rasterize.frames import ego_from_world, ego_pose
 from rasterize.raster import CHANNELS
-from riskmap.data.dataset import DemoDataset
+from riskmap.data.dataset import DemoDataset, PerturbedEgo
 from riskmap.infra.atomic import atomic_write
 from riskmap.infra.checkpoint import read_sidecar, save_checkpoint
 from riskmap.infra.config_mapping import to_plain
@@ -40,24 +40,19 @@ class BCWindows(Dataset):
 
     def __init__(self, base: DemoDataset, config: BCConfig, augment: tuple[float, float, float] | None,
                  seed: int = 0):
-        self.base, self.config, self.augment, self.seed = base, config, augment, seed
-        self.epoch = 0
+        self.base, self.config = base, config
+        # Scenes come from the risk-map planner's own augmentation (same draws), or as recorded.
+        self.scenes = base if augment is None else PerturbedEgo(base, seed, *augment)
 
     def set_epoch(self, epoch: int) -> None:
-        self.epoch = epoch
+        if isinstance(self.scenes, PerturbedEgo):
+            self.scenes.set_epoch(epoch)
 
     def __len__(self) -> int:
         return len(self.base)
 
     def __getitem__(self, index: int) -> dict:
-        scene = self.base.scene(index)
-        if self.augment is not None:
-            probability, heading_deg, lateral_m = self.augment
-            rng = np.random.default_rng([self.seed, self.epoch, index])
-            if rng.random() < probability:
-                heading = np.deg2rad(heading_deg)
-                scene = scene.with_ego_perturbed(rng.uniform(-heading, heading),
-                                                 rng.uniform(-lateral_m, lateral_m))
+        scene = self.scenes.scene(index)
         frames, speeds = bc_inputs(scene, self.config, self.base.raster_config)
         origin, heading = ego_pose(scene)
         future = ego_from_world(scene.ego_future_xy(), origin, heading).astype(np.float32)
