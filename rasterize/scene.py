@@ -77,6 +77,39 @@ class Lane:
 
 
 @dataclass(frozen=True, eq=False)
+class Signal:
+    """A traffic light at one lane's stop line, and its state over the next seconds.
+
+    stop_line [2, 2]: the line's two ends, world metres (across the lane, where vehicles stop).
+    times_s [K]: seconds from the scene's current time (times_s[0] = 0, increasing).
+    red [K] bool: the light forbids passing the stop line at that time (red, or amber treated as
+    red: CommonRoad cycles give red / red-yellow / yellow / green; all but green forbid).
+    """
+
+    stop_line: np.ndarray
+    times_s: np.ndarray
+    red: np.ndarray
+
+    def __post_init__(self) -> None:
+        line = np.asarray(self.stop_line, dtype=np.float64)
+        times = np.asarray(self.times_s, dtype=np.float64)
+        red = np.asarray(self.red, dtype=bool)
+        if line.shape != (2, 2) or not np.isfinite(line).all():
+            raise InputError(f"Signal.stop_line must be finite [2, 2] metres, got {line.shape}")
+        if times.ndim != 1 or len(times) < 1 or red.shape != times.shape \
+                or not np.isfinite(times).all() or (np.diff(times) <= 0).any():
+            raise InputError("Signal.times_s must be increasing finite seconds [K>=1] and "
+                             f"Signal.red bool [K]; got {times.shape} and {red.shape}")
+        object.__setattr__(self, "stop_line", line)
+        object.__setattr__(self, "times_s", times)
+        object.__setattr__(self, "red", red)
+
+    def red_at(self, t_s: float) -> bool:
+        """Whether the light is red `t_s` seconds from now (the last known state beyond K)."""
+        return bool(self.red[max(0, int(np.searchsorted(self.times_s, t_s, side="right")) - 1)])
+
+
+@dataclass(frozen=True, eq=False)
 class Scene:
     """One moment of one episode (see the module docstring for shapes and units)."""
 
@@ -93,6 +126,9 @@ class Scene:
     # The ego's route ahead [K, 2] (world m), from the ego to the point the route rule picks as
     # its goal (`rasterize.highway.route_ahead`); None when unknown.
     route_xy: np.ndarray | None = None
+    # Traffic lights at stop lines, with their state over the next seconds (recordings with
+    # signals; empty elsewhere).
+    signals: tuple[Signal, ...] = field(default_factory=tuple)
 
     def __post_init__(self) -> None:
         if self.route_xy is not None:
@@ -138,6 +174,7 @@ class Scene:
         object.__setattr__(self, "sizes", sizes)
         object.__setattr__(self, "kinds", kinds)
         object.__setattr__(self, "lanes", tuple(self.lanes))
+        object.__setattr__(self, "signals", tuple(self.signals))
 
     @property
     def num_agents(self) -> int:
@@ -166,7 +203,8 @@ class Scene:
         lanes = tuple(replace(lane, centre=lane.centre @ rot_t, left=lane.left @ rot_t,
                               right=lane.right @ rot_t) for lane in self.lanes)
         route = None if self.route_xy is None else self.route_xy @ rot_t
-        return replace(self, states=states, lanes=lanes, route_xy=route)
+        signals = tuple(replace(sig, stop_line=sig.stop_line @ rot_t) for sig in self.signals)
+        return replace(self, states=states, lanes=lanes, route_xy=route, signals=signals)
 
     def with_ego_perturbed(self, heading_rad: float, lateral_m: float) -> Scene:
         """The scene with the ego now turned by `heading_rad` and shifted `lateral_m` to its left.
