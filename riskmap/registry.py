@@ -3,6 +3,8 @@
 Built in:
 
     idm              the IDM/MOBIL "human": the ego drives itself, no plan is made
+    yielding         IDM/MOBIL that gives way at conflict zones by gap acceptance (the
+                     intersection teacher, `riskmap.sim.yielding`)
     cv               constant velocity: current speed and heading for 6 s
     riskmap:PATH     the risk-map planner from a checkpoint (PATH with or without .safetensors)
     guard:SPEC       SPEC wrapped in the neuro-symbolic guard, TGAT-triggered (`guarded:` too)
@@ -23,7 +25,7 @@ from rasterize.errors import InputError
 from riskmap.sim.plan import HumanDriver
 
 PLUGIN_GROUP = "riskmap.planners"
-SPECS = ("idm", "cv", "replay", "riskmap:PATH", "cnn:PATH", "cnn_lstm:PATH", "rvsg:PATH",
+SPECS = ("idm", "yielding", "cv", "replay", "riskmap:PATH", "cnn:PATH", "cnn_lstm:PATH", "rvsg:PATH",
          "guard:SPEC", "guard-always:SPEC")
 
 
@@ -33,6 +35,10 @@ def make_planner(spec: str, seed: int = 0, goal_variance: float | None = None):
     kind, _, arg = spec.partition(":")
     if kind == "idm" and not arg:
         return HumanDriver()
+    if kind == "yielding" and not arg:
+        from riskmap.sim.yielding import YieldingDriver
+
+        return YieldingDriver()
     if kind == "cv" and not arg:
         from riskmap.planner.baselines import ConstantVelocityPlanner
 

@@ -18,7 +18,7 @@ def _cmd_collect(args: argparse.Namespace) -> int:
         raise InputError("collect needs --env ENV and --episodes N (or --from-commonroad FILES)")
     from riskmap.data.collect import CollectConfig, collect
 
-    config = CollectConfig(env_id=args.env, episodes=args.episodes, seed=args.seed)
+    config = CollectConfig(env_id=args.env, episodes=args.episodes, seed=args.seed, human=args.human)
     manifest = collect(config, Path(args.out), workers=args.workers, resume=args.resume,
                        progress=not args.quiet)
     counts = manifest["counts"]
@@ -47,6 +47,10 @@ def add_parsers(sub) -> None:
     p.add_argument("--from-commonroad", nargs="+", metavar="DIR_OR_FILE",
                    help="CommonRoad .xml files or directories: every recorded vehicle with 2 s of "
                         "history and 6 s of future is a demonstrator (instead of --env)")
+    p.add_argument("--human", choices=("idm", "yielding"),
+                   help="the demonstrator: idm (IDM/MOBIL) or yielding (IDM/MOBIL that gives way "
+                        "at conflict zones by gap acceptance); default: yielding at "
+                        "intersection-v0, idm elsewhere")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", required=True, help="dataset directory to create")
     p.add_argument("--workers", type=positive_int, default=1, help="processes (default 1)")

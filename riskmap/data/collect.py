@@ -1,7 +1,9 @@
 """Demonstrations from highway-env: the ego is driven by IDM + MOBIL (the "human").
 
 Each episode: reset the env with a seed derived from (seed, episode), replace the ego by an
-IDM/MOBIL vehicle with its own driver parameters (desired speed, time gap, politeness), step the
+IDM/MOBIL vehicle with its own driver parameters (desired speed, time gap, politeness) -- at
+intersections by default the `yielding` teacher, which also gives way at conflict zones by gap
+acceptance (`riskmap.sim.yielding`; `--human idm` keeps plain IDM/MOBIL) -- step the
 road at `record_hz`, record every vehicle, drop vehicles far from the ego (they cannot reach the
 scene and they cost time), then cut training windows (history + future at `window_dt_s`) and
 write them as one shard per episode, atomically. `--resume` skips the episodes already written.
@@ -25,10 +27,12 @@ from riskmap.infra.atomic import write_json, write_npz
 from riskmap.infra.parallel import run_parallel
 from riskmap.infra.provenance import provenance
 from riskmap.sim.episode import FAMILY_SETUPS, Episode, FamilySetup, make_env
-from riskmap.sim.plan import HumanDriver
+from riskmap.registry import make_planner
 from riskmap.sim.rollout import LoopConfig, drive_world
 
 FORMAT_VERSION = 2
+# Demonstrators: planner SPECs that drive the world's own ego (no plans to track).
+HUMANS = ("idm", "yielding")
 SHARD_DIR = "shards"
 MANIFEST = "manifest.json"
 INDEX = "index.json"
@@ -50,9 +54,15 @@ class CollectConfig:
     scene_radius_m: float = 120.0
     max_agents: int = 32
     raster: RasterConfig | None = None
+    human: str | None = None           # the demonstrator's SPEC; None: the family's teacher
 
     def __post_init__(self) -> None:
         family = family_of_env(self.env_id)
+        if self.human is None:
+            object.__setattr__(self, "human", FAMILY_SETUPS[family].teacher)
+        if self.human not in HUMANS:
+            raise InputError(f"--human {self.human!r} is not a demonstrator; choose one of "
+                             f"{', '.join(HUMANS)}")
         if not (isinstance(self.episodes, int) and self.episodes >= 1):
             raise InputError(f"--episodes must be a positive integer, got {self.episodes!r}")
         if self.raster is None:
@@ -78,9 +88,9 @@ class CollectConfig:
 
 
 def run_episode(env, config: CollectConfig, episode: int):
-    """Simulate one episode with the IDM/MOBIL ego; returns (windows as Scenes, episode info)."""
+    """Simulate one episode with the demonstrator ego; returns (windows as Scenes, episode info)."""
     run = Episode(env, config.env_id, config.seed, episode, config.record_hz)
-    drive_world(run, HumanDriver(), LoopConfig(round(config.setup.episode_s * config.record_hz), replan_every=1))
+    drive_world(run, make_planner(config.human), LoopConfig(round(config.setup.episode_s * config.record_hz), replan_every=1))
     recorder = run.recorder
     stride = int(round(config.window_stride_s * config.record_hz))
     first = int(round(config.history_s * config.record_hz))
@@ -147,6 +157,9 @@ def _check_out_dir(out: Path, config: CollectConfig, resume: bool) -> None:
         except (OSError, ValueError, KeyError):
             raise InputError(f"{manifest} is unreadable; delete {out} and collect again") from None
         mine = json.loads(json.dumps(config.to_dict()))
+        previous.setdefault("human", "idm")   # datasets from before the choice were IDM/MOBIL
+        for data in (previous, mine):
+            data.get("family_setup", {}).pop("teacher", None)   # `human` says who drove
         if {k: v for k, v in previous.items() if k != "episodes"} != \
                 {k: v for k, v in mine.items() if k != "episodes"}:
             raise InputError(f"--out {out} was collected with a different configuration; "

@@ -35,6 +35,7 @@ class FamilySetup:
     keep_radius_m: float = 250.0       # vehicles farther from the ego are removed
     ego_destinations: tuple[str, ...] = ()   # exits the ego may be routed to (random per episode)
     spawn_every_s: float = 0.0         # >0: call the env's own traffic spawner this often
+    teacher: str = "idm"               # the demonstrator `riskmap collect` records (a SPEC)
 
 
 FAMILY_SETUPS: dict[str, FamilySetup] = {
@@ -44,7 +45,7 @@ FAMILY_SETUPS: dict[str, FamilySetup] = {
                               ego_destinations=("exr", "sxr", "nxr")),
     "intersection": FamilySetup(16.0, DriverRanges((6.0, 10.0)), {"duration": 16},
                                 keep_radius_m=150.0, ego_destinations=("o1", "o2", "o3"),
-                                spawn_every_s=1.0),
+                                spawn_every_s=1.0, teacher="yielding"),
 }
 
 

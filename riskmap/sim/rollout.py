@@ -174,7 +174,7 @@ def drive_episode(env, planner, config: DriveConfig, episode: int, hooks: DriveH
                       config.control_hz // config.replan_hz, config.history_s, config.gap_radius_m)
     loop_record = drive_world(run, planner, loop, hooks)
     record = EpisodeRecord.measured(
-        "idm" if loop_record.drives_itself else type(planner).__name__, run.crashed, run.off_network,
+        getattr(planner, "name", "idm") if loop_record.drives_itself else type(planner).__name__, run.crashed, run.off_network,
         round(run.time_s, 3), loop_record.distance_m, loop_record.speeds, loop_record.gaps,
         loop_record.plan_times_s, extra={"episode": episode, "env_seed": run.seed, "driver": run.driver})
     return record.as_dict()
