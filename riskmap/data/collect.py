@@ -26,8 +26,8 @@ from rasterize.scene_io import pack_scenes
 from riskmap.infra.atomic import write_json, write_npz
 from riskmap.infra.parallel import run_parallel
 from riskmap.infra.provenance import provenance
-from riskmap.sim.episode import FAMILY_SETUPS, Episode, FamilySetup, make_env
 from riskmap.registry import make_planner
+from riskmap.sim.episode import FAMILY_SETUPS, Episode, FamilySetup, make_env
 from riskmap.sim.rollout import LoopConfig, drive_world
 
 FORMAT_VERSION = 2
