@@ -22,6 +22,7 @@ from riskmap.sim.control import ControllerConfig, TrackingController
 from riskmap.sim.episode import FAMILY_SETUPS, Episode
 from riskmap.sim.plan import check_plan, drives_itself
 from riskmap.sim.record import EpisodeRecord
+from riskmap.sim.yield_events import YieldEventCounter
 
 
 @dataclass(frozen=True)
@@ -89,6 +90,7 @@ class LoopRecord:
     speeds: list[float]
     gaps: list[float]
     plan_times_s: list[float]
+    yield_events: int = 0              # waits while a crossing vehicle passed (`yield_events`)
 
 
 class _Tracker:
@@ -143,6 +145,7 @@ def drive_world(world, planner, config: LoopConfig, hooks: DriveHooks = DriveHoo
     for hook in hooks.on_ready:
         hook(world)
     distance, speeds, gaps = 0.0, [], []
+    yields = YieldEventCounter(world.dt)
     for k in range(config.steps):
         if tracker is not None:
             tracker.command(k)
@@ -151,11 +154,13 @@ def drive_world(world, planner, config: LoopConfig, hooks: DriveHooks = DriveHoo
         distance += float(np.linalg.norm(world.ego.position - before))
         speeds.append(float(world.ego.speed))
         gaps.append(world.min_gap(config.gap_radius_m))
+        yields.update(speeds[-1], lambda: world.scene(0.0))
         if hooks.on_step is not None:
             hooks.on_step(world)
         if world.done:
             break
-    record = LoopRecord(human, distance, speeds, gaps, [] if tracker is None else tracker.plan_times)
+    record = LoopRecord(human, distance, speeds, gaps, [] if tracker is None else tracker.plan_times,
+                        yields.finish())
     if hooks.on_end is not None:
         hooks.on_end(world, record)
     return record
@@ -176,5 +181,6 @@ def drive_episode(env, planner, config: DriveConfig, episode: int, hooks: DriveH
     record = EpisodeRecord.measured(
         getattr(planner, "name", "idm") if loop_record.drives_itself else type(planner).__name__, run.crashed, run.off_network,
         round(run.time_s, 3), loop_record.distance_m, loop_record.speeds, loop_record.gaps,
-        loop_record.plan_times_s, extra={"episode": episode, "env_seed": run.seed, "driver": run.driver})
+        loop_record.plan_times_s, extra={"episode": episode, "env_seed": run.seed, "driver": run.driver,
+                                                    "yield_events": loop_record.yield_events})
     return record.as_dict()

@@ -63,3 +63,31 @@ def test_teacher_never_reverses():
                 DriveHooks(on_step=lambda w: speeds.append(w.ego.speed)))
     assert min(speeds) >= 0.0 and not run.crashed
     assert np.mean(speeds) > 1.0   # it does drive
+
+
+def test_yield_events_count_waits_for_crossing_traffic_only():
+    from rasterize.scene import Scene
+    from riskmap.sim.yield_events import YieldEventCounter
+
+    def scene(other_xy, other_heading, other_speed=8.0):
+        states = np.zeros((2, 1, 6))
+        states[0, 0] = [0, 0, 1, 0, 0, 0]                       # ego at the origin facing +x
+        states[1, 0] = [*other_xy, *other_heading, other_speed, 0]
+        return Scene(states, np.ones((2, 1), bool), np.array([[5.0, 2.0]] * 2),
+                     np.zeros(2, np.int8), 0, 0, 0.1)
+
+    def count(frames, speed=0.0):
+        counter = YieldEventCounter(0.1)
+        for frame in frames:
+            counter.update(speed, lambda f=frame: f)
+        counter.update(5.0, None)                                # drives off: the wait ends
+        return counter.events
+
+    crossing = [scene((10.0, y), (0.0, 1.0)) for y in np.linspace(-6, 6, 15)]
+    assert count(crossing) == 1
+    assert count(crossing[:5]) == 0                              # 0.5 s: too short a wait
+    assert count(crossing, speed=3.0) == 0                       # the ego did not wait
+    queue = [scene((8.0, 0.0), (1.0, 0.0), 0.0)] * 15            # a stopped car ahead
+    assert count(queue) == 0
+    behind = [scene((-10.0, y), (0.0, 1.0)) for y in np.linspace(-6, 6, 15)]
+    assert count(behind) == 0
