@@ -36,9 +36,9 @@ def make_planner(spec: str, seed: int = 0, goal_variance: float | None = None):
     if kind == "idm" and not arg:
         return HumanDriver()
     if kind == "yielding" and not arg:
-        from riskmap.sim.yielding import YieldingDriver
+        from riskmap.sim.yielding import demonstrator
 
-        return YieldingDriver()
+        return demonstrator("yielding")
     if kind == "cv" and not arg:
         from riskmap.planner.baselines import ConstantVelocityPlanner
 

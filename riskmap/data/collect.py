@@ -26,13 +26,11 @@ from rasterize.scene_io import pack_scenes
 from riskmap.infra.atomic import write_json, write_npz
 from riskmap.infra.parallel import run_parallel
 from riskmap.infra.provenance import provenance
-from riskmap.registry import make_planner
 from riskmap.sim.episode import FAMILY_SETUPS, Episode, FamilySetup, make_env
 from riskmap.sim.rollout import LoopConfig, drive_world
+from riskmap.sim.yielding import DEMONSTRATORS, demonstrator
 
 FORMAT_VERSION = 2
-# Demonstrators: planner SPECs that drive the world's own ego (no plans to track).
-HUMANS = ("idm", "yielding")
 SHARD_DIR = "shards"
 MANIFEST = "manifest.json"
 INDEX = "index.json"
@@ -60,9 +58,9 @@ class CollectConfig:
         family = family_of_env(self.env_id)
         if self.human is None:
             object.__setattr__(self, "human", FAMILY_SETUPS[family].teacher)
-        if self.human not in HUMANS:
+        if self.human not in DEMONSTRATORS:
             raise InputError(f"--human {self.human!r} is not a demonstrator; choose one of "
-                             f"{', '.join(HUMANS)}")
+                             f"{', '.join(DEMONSTRATORS)}")
         if not (isinstance(self.episodes, int) and self.episodes >= 1):
             raise InputError(f"--episodes must be a positive integer, got {self.episodes!r}")
         if self.raster is None:
@@ -90,7 +88,7 @@ class CollectConfig:
 def run_episode(env, config: CollectConfig, episode: int):
     """Simulate one episode with the demonstrator ego; returns (windows as Scenes, episode info)."""
     run = Episode(env, config.env_id, config.seed, episode, config.record_hz)
-    drive_world(run, make_planner(config.human), LoopConfig(round(config.setup.episode_s * config.record_hz), replan_every=1))
+    drive_world(run, demonstrator(config.human), LoopConfig(round(config.setup.episode_s * config.record_hz), replan_every=1))
     recorder = run.recorder
     stride = int(round(config.window_stride_s * config.record_hz))
     first = int(round(config.history_s * config.record_hz))

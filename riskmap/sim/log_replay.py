@@ -15,14 +15,16 @@ from pathlib import Path
 
 import numpy as np
 
+from rasterize.config import family_of_env
 from rasterize.errors import InputError
 from rasterize.frames import ego_from_world, heading_angle, highway_env_from_world, world_from_highway_env
 from rasterize.scene import Scene
 from riskmap.infra.atomic import write_npz
-from riskmap.sim.episode import Episode
+from riskmap.sim.episode import FAMILY_SETUPS, Episode
 from riskmap.sim.metrics import centre_off_lane
-from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, HumanDriver, Plan
+from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, Plan
 from riskmap.sim.rollout import LoopConfig, drive_world
+from riskmap.sim.yielding import demonstrator
 
 
 @dataclass(frozen=True)
@@ -79,9 +81,10 @@ def log_of(run: Episode) -> HumanLog:
 
 def record_human_episode(env, env_id: str, seed: int, episode: int, rate_hz: int,
                          episode_s: float) -> HumanLog:
-    """Drive the IDM/MOBIL human on (seed, episode) for `episode_s` (or until it crashes / leaves)."""
+    """Drive the family's demonstrator (the human: IDM/MOBIL, or the yielding teacher at
+    intersections) on (seed, episode) for `episode_s` (or until it crashes / leaves)."""
     run = Episode(env, env_id, seed, episode, rate_hz)
-    drive_world(run, HumanDriver(), LoopConfig(round(episode_s * rate_hz), replan_every=1))
+    drive_world(run, demonstrator(FAMILY_SETUPS[family_of_env(env_id)].teacher), LoopConfig(round(episode_s * rate_hz), replan_every=1))
     return log_of(run)
 
 

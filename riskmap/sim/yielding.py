@@ -221,3 +221,16 @@ class YieldingDriver(HumanDriver):
         world.replace_ego(vehicle)
         if isinstance(getattr(world, "driver", None), dict):
             world.driver["critical_gap_s"] = vehicle.critical_gap_s
+
+
+DEMONSTRATORS = ("idm", "yielding")
+
+
+def demonstrator(name: str) -> HumanDriver:
+    """The self-driving ego `name` (one of `DEMONSTRATORS`): plain IDM/MOBIL or the yielding
+    teacher. Collection and recorded human episodes drive with it."""
+    if name == "idm":
+        return HumanDriver()
+    if name == "yielding":
+        return YieldingDriver()
+    raise ValueError(f"unknown demonstrator {name!r}; choose one of {', '.join(DEMONSTRATORS)}")

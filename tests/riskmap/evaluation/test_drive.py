@@ -10,14 +10,15 @@ from riskmap.sim.episode import make_env
 from riskmap.sim.rollout import DriveConfig
 
 
-def test_idm_drive_replays_the_demonstrator(tmp_path):
-    summary = drive(DriveConfig("intersection-v0", episodes=2, seed=11), "idm", tmp_path / "d",
+@pytest.mark.parametrize("human", ["yielding", "idm"])
+def test_drive_replays_the_demonstrator(tmp_path, human):
+    summary = drive(DriveConfig("intersection-v0", episodes=2, seed=11), human, tmp_path / "d",
                     progress=False)
     assert summary["summary"]["episodes"] == 2
     env = make_env("intersection-v0")
     for e in range(2):
         record = json.loads((tmp_path / "d" / "episodes" / f"episode_{e:06d}.json").read_text())
-        _, info = run_episode(env, CollectConfig("intersection-v0", 2, seed=11), e)
+        _, info = run_episode(env, CollectConfig("intersection-v0", 2, seed=11, human=human), e)
         assert record["collided"] == info["ego_crashed"]
         assert record["simulated_s"] == pytest.approx(info["simulated_s"])
         assert record["driver"] == info["driver"]
