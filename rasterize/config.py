@@ -8,6 +8,7 @@ the grid on the verges.
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import asdict, dataclass
 
 from rasterize.errors import InputError
@@ -70,18 +71,36 @@ class _Division:
         return asdict(self)
 
 
+MAX_PREDICT_S = 10.0
+
+
+def check_predict_s(value, name: str = "RasterConfig.predict_s") -> None:
+    """InputError unless `value` is a finite number of seconds in [0, MAX_PREDICT_S]."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real) \
+            or not 0.0 <= value <= MAX_PREDICT_S:   # NaN fails the comparison too
+        raise InputError(f"{name}={value!r}: must be seconds of predicted future in "
+                         f"[0, {MAX_PREDICT_S:g}] (0 draws none)")
+
+
 @dataclass(frozen=True)
 class RasterConfig(_Division):
-    """The BEV raster: `rows` x `cols` pixels over `extent`, history drawn over `history_s`."""
+    """The BEV raster: `rows` x `cols` pixels over `extent`, history drawn over `history_s`.
+
+    `predict_s` > 0 adds the predicted future over that many seconds (`rasterize.raster.channels`);
+    0, the default and what configs saved before it existed load as, draws the 8 base channels.
+    """
 
     rows: int = 200
     cols: int = 200
     history_s: float = 2.0
+    predict_s: float = 0.0
 
     def __post_init__(self) -> None:
         super().__post_init__()
         if not self.history_s >= 0:
             raise InputError(f"RasterConfig.history_s={self.history_s!r}: must be >= 0 seconds")
+        check_predict_s(self.predict_s)
+        object.__setattr__(self, "predict_s", float(self.predict_s))   # JSON-safe in sidecars
 
     @classmethod
     def from_dict(cls, data: dict) -> RasterConfig:

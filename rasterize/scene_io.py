@@ -10,6 +10,14 @@ lanes stored as concatenated points with offsets:
     lane_centre, lane_left, lane_right [P, 2] float32
     lane_lines [L, 2] int8 (left, right LineType)   lane_width_m, lane_start_s [L] float32
     route_xy [W, K, 2] float32, has_route [W] bool   the ego's route ahead (zeros when unknown)
+
+Traffic lights (`Scene.signals`), ragged twice; optional, since shards written before signals
+existed lack them (they unpack with no signals):
+
+    signal_offsets [W + 1]        signals of scene w are signal_offsets[w]:signal_offsets[w + 1]
+    signal_stop_line [S, 2, 2] float32
+    signal_time_offsets [S + 1]   states of signal i are signal_time_offsets[i]:[i + 1]
+    signal_times_s [Q] float64 (seconds from the scene's time), signal_red [Q] bool
 """
 
 from __future__ import annotations
@@ -17,13 +25,55 @@ from __future__ import annotations
 import numpy as np
 
 from rasterize.errors import InputError
-from rasterize.scene import STATE_DIM, Lane, Scene
+from rasterize.scene import STATE_DIM, Lane, Scene, Signal
 
 SCENE_KEYS = (
     "states", "valid", "sizes", "kinds", "ego_index", "current_index", "dt_s", "time_s",
     "lane_offsets", "point_offsets", "lane_centre", "lane_left", "lane_right", "lane_lines",
     "lane_width_m", "lane_start_s", "route_xy", "has_route",
 )
+# Optional (all or none): older shards have no signals.
+SIGNAL_KEYS = ("signal_offsets", "signal_stop_line", "signal_time_offsets", "signal_times_s",
+               "signal_red")
+
+
+def _pack_signals(scenes: list[Scene]) -> dict[str, np.ndarray]:
+    signals = [sig for s in scenes for sig in s.signals]
+    return {
+        "signal_offsets": np.cumsum([0] + [len(s.signals) for s in scenes]).astype(np.int64),
+        "signal_stop_line": np.array([sig.stop_line for sig in signals], np.float32).reshape(-1, 2, 2),
+        "signal_time_offsets": np.cumsum([0] + [len(sig.times_s) for sig in signals]).astype(np.int64),
+        # float64: times a few ms apart must stay increasing.
+        "signal_times_s": np.concatenate([sig.times_s for sig in signals] or [np.zeros(0)]),
+        "signal_red": np.concatenate([sig.red for sig in signals] or [np.zeros(0, bool)]),
+    }
+
+
+def _unpack_signals(arrays: dict[str, np.ndarray], index: int) -> tuple[Signal, ...]:
+    if "signal_offsets" not in arrays:
+        return ()
+    to = arrays["signal_time_offsets"]
+    return tuple(
+        Signal(arrays["signal_stop_line"][i], arrays["signal_times_s"][to[i]:to[i + 1]],
+               arrays["signal_red"][to[i]:to[i + 1]])
+        for i in range(arrays["signal_offsets"][index], arrays["signal_offsets"][index + 1])
+    )
+
+
+def _check_signals(arrays: dict[str, np.ndarray], w: int, name: str) -> None:
+    present = [k for k in SIGNAL_KEYS if k in arrays]
+    if not present:
+        return
+    if len(present) != len(SIGNAL_KEYS):
+        missing = sorted(set(SIGNAL_KEYS) - set(present))
+        raise InputError(f"{name}: signal arrays {missing} are missing; re-collect this shard")
+    offsets, times = arrays["signal_offsets"], arrays["signal_time_offsets"]
+    n_signals = int(offsets[-1]) if offsets.shape == (w + 1,) else -1
+    if (n_signals < 0 or arrays["signal_stop_line"].shape != (n_signals, 2, 2)
+            or times.shape != (n_signals + 1,)
+            or arrays["signal_times_s"].shape != (int(times[-1]),)
+            or arrays["signal_red"].shape != arrays["signal_times_s"].shape):
+        raise InputError(f"{name}: signal arrays are inconsistent; re-collect this shard")
 
 
 def pack_scenes(scenes: list[Scene]) -> dict[str, np.ndarray]:
@@ -65,6 +115,7 @@ def pack_scenes(scenes: list[Scene]) -> dict[str, np.ndarray]:
             if len(s.route_xy) != k:
                 raise InputError("scenes of one shard must share their route length")
             out["route_xy"][i] = s.route_xy
+    out.update(_pack_signals(scenes))
     return out
 
 
@@ -86,6 +137,7 @@ def check_packed(arrays: dict[str, np.ndarray], name: str) -> int:
     n_points = int(arrays["point_offsets"][-1]) if arrays["point_offsets"].size else 0
     if arrays["point_offsets"].shape != (n_lanes + 1,) or arrays["lane_centre"].shape != (n_points, 2):
         raise InputError(f"{name}: lane arrays are inconsistent; re-collect this shard")
+    _check_signals(arrays, w, name)
     return w
 
 
@@ -110,4 +162,5 @@ def unpack_scene(arrays: dict[str, np.ndarray], index: int, source: str = "") ->
         current_index=int(arrays["current_index"][index]), dt=float(arrays["dt_s"][index]),
         lanes=tuple(lanes), source=source, time_s=float(arrays["time_s"][index]),
         route_xy=arrays["route_xy"][index] if arrays["has_route"][index] else None,
+        signals=_unpack_signals(arrays, index),
     )

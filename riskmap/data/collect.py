@@ -155,7 +155,10 @@ def _check_out_dir(out: Path, config: CollectConfig, resume: bool) -> None:
         except (OSError, ValueError, KeyError):
             raise InputError(f"{manifest} is unreadable; delete {out} and collect again") from None
         mine = json.loads(json.dumps(config.to_dict()))
-        previous.setdefault("human", "idm")   # datasets from before the choice were IDM/MOBIL
+        if "human" in mine:
+            previous.setdefault("human", "idm")   # datasets from before the choice were IDM/MOBIL
+        if isinstance(previous.get("raster"), dict):
+            previous["raster"].setdefault("predict_s", 0.0)   # from before predict_s: drew none
         for data in (previous, mine):
             data.get("family_setup", {}).pop("teacher", None)   # `human` says who drove
         if {k: v for k, v in previous.items() if k != "episodes"} != \

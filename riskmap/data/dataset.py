@@ -1,7 +1,8 @@
 """The demonstration dataset: shards written by `riskmap collect`, served as training samples.
 
 A sample (grid G = resolution, C = raster channels):
-    raster       float32 [C, 200, 200]  BEV raster in [0, 1]
+    raster       float32 [C, 200, 200]  BEV raster in [0, 1]; C = len(rasterize.raster.channels(
+                                        dataset.raster_config)): 8, or 10 with predict_s > 0
     motion       float32 [3, G, G]      ego speed, cell x / length, cell y / width
     demo         float32 [2, G, G]      D_demo: path visit counts, goal one-hot
     uncertainty  float32 [G, G]         ado agents' positional uncertainty
@@ -18,6 +19,7 @@ from __future__ import annotations
 
 import json
 import zipfile
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -57,6 +59,11 @@ def load_manifest(root: Path) -> dict:
         raise InputError(f"{path} is not valid JSON; collect the dataset again") from None
 
 
+def collected_raster_config(root: str | Path) -> RasterConfig:
+    """The raster configuration a dataset was collected with (its manifest's)."""
+    return RasterConfig.from_dict(load_manifest(Path(root))["config"]["raster"])
+
+
 def _load_shard(path: Path) -> dict[str, np.ndarray]:
     if not path.exists():
         raise InputError(f"shard {path} listed in the index is missing; "
@@ -74,7 +81,9 @@ class DemoDataset(_TorchDataset):
     """Training windows of a collected dataset (see the module docstring for a sample's keys).
 
     `raster`: the raster configuration the caller needs (for instance a checkpoint's); it must
-    equal the dataset's, since the extent was chosen with the scenario family at collection.
+    equal the dataset's, since the extent was chosen with the scenario family at collection,
+    except in `predict_s`: the predicted future is drawn from each window's present, so any
+    horizon can be drawn from any dataset. Samples are drawn with `raster` (else the dataset's).
     """
 
     def __init__(self, root: str | Path, resolution: int = 50, raster: RasterConfig | None = None,
@@ -90,12 +99,12 @@ class DemoDataset(_TorchDataset):
             raise InputError(f"dataset {self.root} has format version {version}, this toolkit reads "
                              f"version {FORMAT_VERSION}; collect it again with `riskmap collect`")
         collected = RasterConfig.from_dict(self.manifest["config"]["raster"])
-        if raster is not None and raster != collected:
+        if raster is not None and replace(raster, predict_s=collected.predict_s) != collected:
             raise InputError(
                 f"dataset {self.root} was collected with raster config {collected} but {raster} "
                 "is required; collect a dataset with the matching extent or use a matching model"
             )
-        self.raster_config = collected
+        self.raster_config = collected if raster is None else raster
         self.grid = collected.grid(resolution)
         self.sigma_x, self.sigma_y, self.goal_variance = sigma_x, sigma_y, goal_variance
         self.source = self.manifest["config"]["env_id"]

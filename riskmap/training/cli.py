@@ -47,6 +47,9 @@ HELP = {
     "backbone_weights": "local torchvision ResNet-34 state dict to initialise the stem",
     "max_windows": "use at most this many training windows (quick runs)",
     "history_frames": "cnn_lstm: raster frames 0.5 s apart fed to the LSTM",
+    "predict_s": "draw the other agents' predicted future (constant speed along their lanes) and "
+                 "the traffic lights' red over this many seconds as 2 extra raster channels "
+                 "(0: none; default: as the dataset was collected, normally none)",
 }
 
 
@@ -55,7 +58,7 @@ def add_parsers(sub) -> None:
     add_config_options(p, TrainConfig, "data", "out", "resolution", "uncertainty_weight", "sigma_x",
                        "sigma_y", "goal_variance", "goal", "epochs", "batch_size", "lr", "horizon",
                        "val_groups", "device", "seed", "backbone_weights", "init_checkpoint",
-                       "max_windows", help=HELP,
+                       "max_windows", "predict_s", help=HELP,
                        option_types=POSITIVE)
     p.add_argument("--resume", action="store_true", help="continue an interrupted run exactly")
     p.add_argument("--quiet", action="store_true")
@@ -64,8 +67,8 @@ def add_parsers(sub) -> None:
     p = sub.add_parser("train-baseline", help="train a behaviour-cloning baseline (cnn, cnn_lstm, rvsg)")
     p.add_argument("kind", choices=("cnn", "cnn_lstm", "cnn-lstm", "rvsg"))
     add_config_options(p, BaselineTrainConfig, "data", "out", "epochs", "batch_size", "lr",
-                       "history_frames", "val_groups", "seed", "max_windows", help=HELP,
-                       option_types=POSITIVE)
+                       "history_frames", "val_groups", "seed", "max_windows", "predict_s",
+                       help=HELP, option_types=POSITIVE)
     p.add_argument("--resume", action="store_true", help="continue an interrupted run exactly")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=_cmd_train_baseline)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from rasterize.config import check_predict_s
 from rasterize.errors import InputError
 
 
@@ -43,17 +44,22 @@ class TrainConfig:
     backbone_weights: str | None = None
     init_checkpoint: str | None = None  # fine-tune: start from this risk-map checkpoint's weights
     max_windows: int | None = None      # cap on training windows (smoke tests)
+    # Seconds of predicted future drawn in the raster (RasterConfig.predict_s); None: as the
+    # dataset was collected.
+    predict_s: float | None = None
 
     def __post_init__(self) -> None:
         if self.val_groups is not None:
             object.__setattr__(self, "val_groups", tuple(self.val_groups))
+        if self.predict_s is not None:
+            check_predict_s(self.predict_s, "--predict-s")
         if self.goal_variance is not None and not self.goal_variance > 0:
             raise InputError(f"--goal-variance must be positive (cells²), got {self.goal_variance}")
         for name in ("epochs", "batch_size", "resolution"):
             if getattr(self, name) < 1:
                 raise InputError(f"--{name.replace('_', '-')} must be positive")
         if self.horizon is None:
-            object.__setattr__(self, "horizon", int(round(1.6 * self.resolution)))
+            object.__setattr__(self, "horizon", round(1.6 * self.resolution))
         if not 0 < self.val_fraction < 1:
             raise InputError(f"val_fraction must be in (0, 1), got {self.val_fraction}")
 
@@ -83,11 +89,14 @@ class BaselineTrainConfig:
     augment_lateral_m: float = 1.0
     seed: int = 0
     max_windows: int | None = None      # cap on training windows (quick runs)
+    predict_s: float | None = None      # as TrainConfig.predict_s
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "kind", _normalise_kind(self.kind))
         if self.val_groups is not None:
             object.__setattr__(self, "val_groups", tuple(self.val_groups))
+        if self.predict_s is not None:
+            check_predict_s(self.predict_s, "--predict-s")
         for name in ("epochs", "batch_size", "history_frames"):
             if getattr(self, name) < 1:
                 raise InputError(f"--{name.replace('_', '-')} must be positive")

@@ -11,15 +11,17 @@ from __future__ import annotations
 import csv
 import math
 import time
-from dataclasses import asdict
+from dataclasses import MISSING, asdict, fields, replace
 from pathlib import Path
 
 import numpy as np
 import torch
 from torch.utils.data import DataLoader, Subset
 
+from rasterize.config import RasterConfig
 from rasterize.errors import InputError
-from riskmap.data.dataset import DemoDataset, PerturbedEgo
+from rasterize.raster import channels
+from riskmap.data.dataset import DemoDataset, PerturbedEgo, collected_raster_config
 from riskmap.data.groups import dataset_groups, match_groups, natural_key
 from riskmap.infra.atomic import atomic_write
 from riskmap.infra.checkpoint import read_sidecar, save_checkpoint
@@ -44,7 +46,7 @@ def _held_out_groups(dataset: DemoDataset, groups: list[str], val_fraction: floa
     """The groups to validate on: `val_groups` (`match_groups`), else the last
     ⌈val_fraction × groups⌉ in natural order."""
     if not val_groups:
-        return set(groups[-max(1, int(math.ceil(val_fraction * len(groups)))):])
+        return set(groups[-max(1, math.ceil(val_fraction * len(groups))):])
     return match_groups(dataset, groups, val_groups)
 
 
@@ -73,7 +75,7 @@ def split_episodes(dataset: DemoDataset, val_fraction: float,
         if len(episodes) < 2:
             raise InputError(f"dataset {dataset.root} has {len(episodes)} episode(s) with windows; "
                              "training needs at least 2 (one is held out for validation)")
-        n_val = max(1, int(math.ceil(val_fraction * len(episodes))))
+        n_val = max(1, math.ceil(val_fraction * len(episodes)))
         val_eps = set(episodes[-n_val:])
         is_val = [dataset.episode_of(i) in val_eps for i in range(len(dataset))]
     train = [i for i in range(len(dataset)) if not is_val[i]]
@@ -152,16 +154,48 @@ def _sidecar(config: TrainConfig, model_config: ModelConfig, dataset: DemoDatase
     }
 
 
+def raster_for(data: str, predict_s: float | None) -> RasterConfig | None:
+    """The raster a run draws: the dataset's, with `predict_s` seconds of predicted future when
+    given (None: the dataset's own, unchanged)."""
+    if predict_s is None:
+        return None
+    return replace(collected_raster_config(data), predict_s=predict_s)
+
+
+def with_raster_channels(state: dict, in_channels: int) -> dict:
+    """A risk-map state dict whose first convolution takes `in_channels` raster channels: the
+    trained kernels on the first channels, zeros on the added ones, so that the network computes
+    exactly what it did while the added channels learn from zero."""
+    weight = state["backbone.0.weight"]                         # [64, C, 7, 7]
+    grown = weight.new_zeros((weight.shape[0], in_channels, *weight.shape[2:]))
+    grown[:, : weight.shape[1]] = weight
+    return {**state, "backbone.0.weight": grown}
+
+
+def same_settings(saved: dict, config) -> bool:
+    """Whether a run's saved `train` settings are `config`'s but for --epochs (the one setting a
+    resume may change). A setting newer than the saved run (absent from its sidecar) counts as
+    at its default, so that runs begun before it existed still resume."""
+    defaults = {f.name: f.default for f in fields(config) if f.default is not MISSING}
+    return defaults | saved | {"epochs": config.epochs} == to_plain(config)
+
+
 def _init_from(model: RiskMapGenerator, model_config: ModelConfig, checkpoint: Path) -> None:
     """Start from a trained risk-map checkpoint's weights (fine-tuning); its network must be the
-    one this run builds (raster channels and grid resolution)."""
+    one this run builds (grid resolution, raster channels), except that a raster with more
+    channels (`--predict-s` on a checkpoint trained without) starts with the added ones off
+    (`with_raster_channels`)."""
     from riskmap.planner.model import load_model
 
     trained, side = load_model(checkpoint)
-    if ModelConfig(**side["model"]) != model_config:
+    old = ModelConfig(**side["model"])
+    grows = (old.in_channels < model_config.in_channels
+             and replace(old, in_channels=model_config.in_channels) == model_config)
+    if old != model_config and not grows:
         raise InputError(f"--init-checkpoint {checkpoint} is a {side['model']} network, this run "
-                         f"builds {model_config.to_dict()}; use a matching --resolution")
-    model.load_state_dict(trained.state_dict())
+                         f"builds {model_config.to_dict()}; use a matching --resolution and --predict-s")
+    state = trained.state_dict()
+    model.load_state_dict(with_raster_channels(state, model_config.in_channels) if grows else state)
 
 
 def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> dict:
@@ -173,8 +207,9 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
     refuse_unless_resume(out, "a training run", "last.json", resume)
     device = resolve_device(config.device)
     torch.manual_seed(config.seed)
-    dataset = DemoDataset(config.data, config.resolution, sigma_x=config.sigma_x,
-                          sigma_y=config.sigma_y, goal=config.goal)
+    dataset = DemoDataset(config.data, config.resolution,
+                          raster=raster_for(config.data, config.predict_s),
+                          sigma_x=config.sigma_x, sigma_y=config.sigma_y, goal=config.goal)
     dataset.goal_variance = resolve_goal_variance(config.goal_variance, dataset)
     irl = config.irl(dataset.goal_variance)
     train_idx, val_idx = split_episodes(dataset, config.val_fraction, config.val_groups)
@@ -183,7 +218,7 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
         val_idx = val_idx[: max(1, config.max_windows // 4)]
     augmented = PerturbedEgo(dataset, config.seed, config.augment_probability,
                              config.augment_heading_deg, config.augment_lateral_m)
-    model_config = ModelConfig(in_channels=dataset[0]["raster"].shape[0],
+    model_config = ModelConfig(in_channels=len(channels(dataset.raster_config)),
                                resolution=config.resolution)
     model = RiskMapGenerator(model_config)
     if config.backbone_weights:
@@ -195,7 +230,7 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
     start_epoch, best = 0, {"val_ade_m": math.inf}
     if resume and (out / "last.json").exists():
         previous = read_sidecar(out / "last")
-        if previous["train"] | {"epochs": config.epochs} != to_plain(config):
+        if not same_settings(previous["train"], config):
             raise InputError(f"--out {out} was trained with other settings; resume with the same "
                              "flags (only --epochs may change) or choose another --out")
         from safetensors.torch import load_file

@@ -20,15 +20,20 @@ from torch.utils.data import DataLoader, Dataset, Subset
 
 from rasterize.errors import InputError
 from rasterize.frames import ego_from_world, ego_pose
-from rasterize.raster import CHANNELS
+from rasterize.raster import channels
 from riskmap.data.dataset import DemoDataset, PerturbedEgo
 from riskmap.infra.atomic import atomic_write
 from riskmap.infra.checkpoint import read_sidecar, save_checkpoint
-from riskmap.infra.config_mapping import to_plain
 from riskmap.infra.rundir import refuse_unless_resume
 from riskmap.planner.bc import CHECKPOINT_KIND, BCConfig, BCNet, bc_inputs
 from riskmap.training.config import BaselineTrainConfig
-from riskmap.training.train import dataset_sidecar, resolve_goal_variance, split_episodes
+from riskmap.training.train import (
+    dataset_sidecar,
+    raster_for,
+    resolve_goal_variance,
+    same_settings,
+    split_episodes,
+)
 
 
 class BCWindows(Dataset):
@@ -88,19 +93,20 @@ def train_baseline(config: BaselineTrainConfig, resume: bool = False, progress: 
     out = Path(config.out)
     refuse_unless_resume(out, "a training run", "last.json", resume)
     torch.manual_seed(config.seed)
-    dataset = DemoDataset(config.data)
+    dataset = DemoDataset(config.data, raster=raster_for(config.data, config.predict_s))
     train_idx, val_idx = split_episodes(dataset, config.val_fraction, config.val_groups)
     if config.max_windows:
         train_idx = train_idx[: config.max_windows]
         val_idx = val_idx[: max(1, config.max_windows // 4)]
-    bc = BCConfig(kind=config.kind, in_channels=len(CHANNELS), history_frames=config.history_frames,
+    bc = BCConfig(kind=config.kind, in_channels=len(channels(dataset.raster_config)),
+                  history_frames=config.history_frames,
                   goal_variance=resolve_goal_variance(None, dataset))
     model = BCNet(bc)
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr)
     start_epoch, best = 0, {"val_ade_m": math.inf}
     if resume and (out / "last.json").exists():
         previous = read_sidecar(out / "last", kind=CHECKPOINT_KIND)
-        if previous["train"] | {"epochs": config.epochs} != to_plain(config):
+        if not same_settings(previous["train"], config):
             raise InputError(f"--out {out} was trained with other settings; resume with the same "
                              "flags (only --epochs may change) or choose another --out")
         from safetensors.torch import load_file

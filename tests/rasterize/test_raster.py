@@ -4,9 +4,25 @@ import numpy as np
 import pytest
 
 from rasterize.config import Extent, RasterConfig
-from rasterize.raster import CHANNEL_INDEX, CHANNELS, history_intensity, rasterize_scene
-from rasterize.scene import Lane, LineType
-from tests.scenes import UNIT_RASTER, constant_velocity_scene, straight_lane
+from rasterize.errors import InputError
+from rasterize.frames import ego_from_world, pixel_from_ego
+from rasterize.predict import prediction_times
+from rasterize.raster import (
+    CHANNEL_INDEX,
+    CHANNELS,
+    channel_index,
+    channels,
+    future_intensity,
+    history_intensity,
+    rasterize_scene,
+)
+from rasterize.scene import Lane, LineType, Signal
+from tests.rasterize.test_predict import arc_lane
+from tests.scenes import UNIT_RASTER, constant_velocity_scene, state, straight_lane
+
+PREDICT_1S = replace(UNIT_RASTER, predict_s=1.0)
+FUTURE = channel_index(PREDICT_1S)["agents_future"]
+RED = channel_index(PREDICT_1S)["signal_red"]
 
 
 def _mask(rows, cols, shape=(20, 20)):
@@ -98,3 +114,120 @@ def test_configurable_resolution(rows, cols):
     assert raster.shape == (len(CHANNELS), rows, cols)
     # The ego box covers 4 m x 2 m of a 20 m x 20 m extent: 2% of the pixels.
     assert (raster[CHANNEL_INDEX["ego"]] > 0).mean() == pytest.approx(0.02, abs=0.004)
+
+
+# --- predicted future (predict_s > 0) ---------------------------------------------------------
+
+
+def test_predict_s_adds_two_channels_after_the_eight():
+    scene = constant_velocity_scene()
+    assert channels(UNIT_RASTER) == CHANNELS and len(CHANNELS) == 8
+    assert channels(PREDICT_1S) == CHANNELS + ("agents_future", "signal_red")
+    assert rasterize_scene(scene, UNIT_RASTER).shape == (8, 20, 20)
+    raster = rasterize_scene(scene, PREDICT_1S)
+    assert raster.shape == (10, 20, 20)
+    # The base channels are drawn exactly as without prediction.
+    np.testing.assert_array_equal(raster[:8], rasterize_scene(scene, UNIT_RASTER))
+
+
+def test_a_config_saved_without_predict_s_loads_as_none_drawn():
+    saved = UNIT_RASTER.to_dict()
+    del saved["predict_s"]
+    config = RasterConfig.from_dict(saved)
+    assert config.predict_s == 0.0 and config == UNIT_RASTER
+    assert rasterize_scene(constant_velocity_scene(), config).shape[0] == 8
+
+
+@pytest.mark.parametrize("bad", [-0.5, 10.5, float("nan"), float("inf"), "3", True])
+def test_predict_s_is_validated(bad):
+    with pytest.raises(InputError, match="predict_s"):
+        replace(UNIT_RASTER, predict_s=bad)
+
+
+def test_future_intensity_fades_from_255_to_64():
+    values = future_intensity(prediction_times(3.0), 3.0)
+    assert values[0] == 255 and values[-1] == 64 and (np.diff(values) < 0).all()
+    assert future_intensity(np.array([1.0]), 1.0)[0] == 64
+    assert future_intensity(np.array([0.5]), 0.5)[0] == 255
+
+
+def test_straight_lane_future_boxes_lie_ahead_along_the_lane():
+    # Agent on the lane 6 m to the ego's right (y = -6), at x = -8 heading east at 4 m/s, turned
+    # 20 deg towards the ego: along its lane it is at x = -6 (0.5 s) and x = -4 (1 s), on y = -6.
+    scene = constant_velocity_scene(lanes=[straight_lane(-6.0)])
+    states = scene.states.copy()
+    states[1, :] = state(-8.0, -6.0, np.deg2rad(20), 4.0)
+    raster = rasterize_scene(replace(scene, states=states), PREDICT_1S)
+    expected = np.zeros((20, 20), np.uint8)
+    # 0.5 s: x in [-8, -4] -> rows 14..17; 1 s: x in [-6, -2] -> rows 12..15; y in [-7, -5] ->
+    # cols 15..16. The sooner box is the brighter and wins where they overlap.
+    expected[12:16, 15:17] = 64
+    expected[14:18, 15:17] = 255
+    np.testing.assert_array_equal(raster[FUTURE], expected)
+    assert raster[RED].sum() == 0
+
+
+def test_curved_lane_future_boxes_follow_the_curve():
+    config = RasterConfig(Extent(30.0, 30.0, 30.0, 30.0), rows=60, cols=60, history_s=1.0,
+                          predict_s=3.0)
+    lane = arc_lane((10.0, -15.0), 10.0, -np.pi / 2, np.pi / 2)
+    scene = constant_velocity_scene(lanes=[lane])
+    states = scene.states.copy()
+    states[1, :] = state(10.0, -25.0, 0.0, 8.0)       # bottom of the circle, heading east
+    raster = rasterize_scene(replace(scene, states=states), config)[channel_index(config)["agents_future"]]
+    times = prediction_times(3.0)
+    theta = -np.pi / 2 + 8.0 * times / 10.0
+    on_curve = np.array([10.0, -15.0]) + 10.0 * np.stack([np.cos(theta), np.sin(theta)], axis=1)
+    col, row = np.floor(pixel_from_ego(ego_from_world(on_curve, np.zeros(2), 0.0), config)).astype(int).T
+    # Boxes 4 m apart along the arc: each centre pixel shows its own box's brightness.
+    np.testing.assert_array_equal(raster[row, col], future_intensity(times, 3.0))
+    # Straight on at the heading it would be at (34, -25) after 3 s: nothing drawn there.
+    straight = pixel_from_ego(ego_from_world(np.array([[28.0, -25.0]]), np.zeros(2), 0.0), config)
+    c, r = np.floor(straight[0]).astype(int)
+    assert raster[r - 2:r + 3, c - 2:c + 3].sum() == 0
+
+
+def test_the_ego_is_not_drawn_in_the_future_channel():
+    # The ego drives east at 2 m/s; the agent stands still, so its future is its present box.
+    raster = rasterize_scene(constant_velocity_scene(ego_speed=2.0), PREDICT_1S)
+    np.testing.assert_array_equal(raster[FUTURE] > 0, raster[CHANNEL_INDEX["agents"]] > 0)
+
+
+def test_the_recorded_future_is_not_drawn():
+    scene = constant_velocity_scene(lanes=[straight_lane(-6.0)])
+    states = scene.states.copy()
+    states[1, :] = state(-8.0, -6.0, 0.0, 4.0)
+    calm = replace(scene, states=states)
+    wild_states = states.copy()
+    wild_states[:, calm.current_index + 1:] = state(3.0, 7.0, 1.0, 9.0, 0.5)
+    wild = replace(calm, states=wild_states)
+    base = rasterize_scene(calm, PREDICT_1S)
+    assert base[FUTURE].any()
+    np.testing.assert_array_equal(rasterize_scene(wild, PREDICT_1S), base)
+    np.testing.assert_array_equal(rasterize_scene(calm.past(), PREDICT_1S), base)
+
+
+def _signal_scene(times, red):
+    # Stop line across x = 3.5, y in [-2, 2]: drawn 1 m thick -> row 6, cols 8..11.
+    signal = Signal(np.array([[3.5, -2.0], [3.5, 2.0]]), np.array(times, float), np.array(red))
+    return replace(constant_velocity_scene(), signals=(signal,))
+
+
+@pytest.mark.parametrize("times,red,value", [
+    ([0.0], [True], 255),                       # red throughout
+    ([0.0], [False], 0),                        # green throughout: not drawn
+    ([0.0, 1.0], [True, False], 102),           # red at 0, 0.5 of 0..2 s: 2 of 5 samples
+    ([0.0, 1.5], [False, True], 102),           # green now, red at 1.5, 2 s
+    ([0.0, 0.4, 5.0], [False, True, False], 204),   # red from 0.4 s to past the horizon
+])
+def test_signal_red_is_the_share_of_the_horizon_the_light_is_red(times, red, value):
+    config = replace(UNIT_RASTER, predict_s=2.0)
+    raster = rasterize_scene(_signal_scene(times, red), config)[channel_index(config)["signal_red"]]
+    expected = np.zeros((20, 20), np.uint8)
+    expected[6, 8:12] = value
+    np.testing.assert_array_equal(raster, expected)
+
+
+def test_signals_draw_nothing_without_predict_s():
+    raster = rasterize_scene(_signal_scene([0.0], [True]), UNIT_RASTER)
+    np.testing.assert_array_equal(raster, rasterize_scene(constant_velocity_scene(), UNIT_RASTER))

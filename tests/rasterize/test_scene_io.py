@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from rasterize.errors import InputError
+from rasterize.scene import Signal
 from rasterize.scene_io import check_packed, pack_scenes, unpack_scene
 from tests.scenes import constant_velocity_scene, straight_lane
 
@@ -27,4 +28,49 @@ def test_check_packed_names_the_bad_array():
     packed = pack_scenes([constant_velocity_scene()])
     packed["valid"] = packed["valid"][:, :1]
     with pytest.raises(InputError, match="valid has shape"):
+        check_packed(packed, "shard_x")
+
+
+def _signalled(scene, *signals):
+    return replace(scene, signals=signals)
+
+
+def _assert_same_signals(a, b):
+    assert len(a) == len(b)
+    for sa, sb in zip(a, b):
+        np.testing.assert_allclose(sa.stop_line, sb.stop_line, atol=1e-5)
+        np.testing.assert_array_equal(sa.times_s, sb.times_s)
+        np.testing.assert_array_equal(sa.red, sb.red)
+
+
+def test_roundtrip_of_signals_ragged_over_scenes_and_times():
+    red = Signal([[3.5, -2.0], [3.5, 2.0]], [0.0, 1.25, 4.0], [True, False, True])
+    green = Signal([[-1.0, 5.0], [1.0, 5.0]], [0.0], [False])
+    scenes = [_signalled(constant_velocity_scene(), red, green), constant_velocity_scene(),
+              _signalled(constant_velocity_scene(), green)]
+    packed = pack_scenes(scenes)
+    assert check_packed(packed, "test") == 3
+    assert packed["signal_offsets"].tolist() == [0, 2, 2, 3]
+    for i, original in enumerate(scenes):
+        _assert_same_signals(unpack_scene(packed, i).signals, original.signals)
+
+
+def test_shards_without_signals_pack_empty_and_old_shards_unpack_with_none():
+    packed = pack_scenes([constant_velocity_scene()])
+    assert packed["signal_stop_line"].shape == (0, 2, 2) and packed["signal_times_s"].shape == (0,)
+    assert unpack_scene(packed, 0).signals == ()
+    # A shard written before signals existed has none of their arrays.
+    old = {k: v for k, v in pack_scenes([_signalled(constant_velocity_scene(), Signal(
+        [[0.0, 0.0], [0.0, 1.0]], [0.0], [True]))]).items() if not k.startswith("signal_")}
+    assert check_packed(old, "old") == 1
+    assert unpack_scene(old, 0).signals == ()
+
+
+def test_partial_or_inconsistent_signal_arrays_are_named():
+    packed = pack_scenes([_signalled(constant_velocity_scene(), Signal([[0, 0], [0, 1]], [0.0], [True]))])
+    partial = {k: v for k, v in packed.items() if k != "signal_red"}
+    with pytest.raises(InputError, match="signal arrays .*signal_red.* missing"):
+        check_packed(partial, "shard_x")
+    packed["signal_times_s"] = packed["signal_times_s"][:0]
+    with pytest.raises(InputError, match="shard_x: signal arrays are inconsistent"):
         check_packed(packed, "shard_x")

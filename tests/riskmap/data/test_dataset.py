@@ -1,12 +1,14 @@
 
+from dataclasses import replace
+
 import pytest
 import torch
 
 from rasterize.config import Extent, RasterConfig
 from rasterize.errors import InputError
-from rasterize.raster import CHANNELS
+from rasterize.raster import CHANNELS, channels
 from riskmap.data.collect import CollectConfig, collect, shard_path
-from riskmap.data.dataset import DemoDataset
+from riskmap.data.dataset import DemoDataset, collected_raster_config
 
 
 @pytest.fixture(scope="module")
@@ -55,6 +57,23 @@ def test_another_raster_config_is_refused(dataset_dir):
     other = RasterConfig(Extent(60.0, 20.0, 40.0, 40.0))
     with pytest.raises(InputError, match="collected with raster config"):
         DemoDataset(dataset_dir, raster=other)
+    # Another predict_s does not make another extent acceptable.
+    with pytest.raises(InputError, match="collected with raster config"):
+        DemoDataset(dataset_dir, raster=replace(other, predict_s=3.0))
+
+
+def test_a_raster_differing_only_in_predict_s_draws_the_predicted_future(dataset_dir):
+    collected = collected_raster_config(dataset_dir)
+    assert collected.predict_s == 0.0
+    plain = DemoDataset(dataset_dir)
+    ahead = DemoDataset(dataset_dir, raster=replace(collected, predict_s=3.0))
+    assert ahead.raster_config.predict_s == 3.0 and plain.raster_config == collected
+    a, b = plain[5]["raster"], ahead[5]["raster"]
+    assert b.shape == (len(channels(ahead.raster_config)), 200, 200) == (10, 200, 200)
+    torch.testing.assert_close(b[:8], a, rtol=0, atol=0)
+    # Highway traffic is moving: the other agents' future is drawn; highway-env has no lights.
+    assert b[channels(ahead.raster_config).index("agents_future")].any()
+    assert not b[channels(ahead.raster_config).index("signal_red")].any()
 
 
 def test_corrupt_and_empty_shards_are_named(tmp_path, dataset_dir):
