@@ -22,7 +22,8 @@ def _cmd_drive(args: argparse.Namespace) -> int:
     gap = "nobody near" if summary["min_gap_m"] is None else f"{summary['min_gap_m']:.1f} m"
     print(f"{spec} on {args.env}: {summary['episodes']} episodes, collision rate "
           f"{summary['collision_rate']:.2f}, distance {summary['distance_m']:.0f} m, "
-          f"min gap {gap} -> {Path(args.out) / 'summary.json'}")
+          f"min gap {gap}, yielding events {summary['yield_events'] or 0:.2f} per episode "
+          f"-> {Path(args.out) / 'summary.json'}")
     return 0
 
 

@@ -23,6 +23,12 @@ from riskmap.sim.record import current_names
 from riskmap.sim.rollout import DriveConfig, DriveHooks, drive_episode
 
 
+def mean_count(records: list[dict], key: str) -> float | None:
+    """Mean of a per-episode count over the records that hold it (None if none do)."""
+    values = [r[key] for r in records if r.get(key) is not None]
+    return float(np.mean(values)) if values else None
+
+
 def summarise(records: list[dict]) -> dict:
     def mean(key):
         # None (a min gap with nobody near, or a measure the episode lacks) is left out of the mean.
@@ -36,6 +42,9 @@ def summarise(records: list[dict]) -> dict:
         "distance_m": mean("distance_m"),
         "mean_speed_mps": mean("mean_speed_mps"),
         "min_gap_m": mean("min_gap_m"),
+        # Counts per episode; records from before a count existed hold none (left out).
+        "yield_events": mean_count(records, "yield_events"),
+        "red_light_violations": mean_count(records, "red_light_violations"),
         "plan_ms_median": float(np.median([r["plan_ms_median"] for r in records
                                            if r["plan_ms_median"] is not None]))
         if any(r["plan_ms_median"] is not None for r in records) else None,

@@ -8,15 +8,18 @@ import numpy as np
 
 from rasterize.config import RasterConfig
 from rasterize.frames import ego_from_world, ego_pose
-from rasterize.raster import CHANNEL_INDEX, rasterize_scene
+from rasterize.raster import CHANNELS, FUTURE_CHANNELS, rasterize_scene
 from rasterize.scene import Scene
 
-# Colours (RGB in [0, 1]) of the raster layers, painted in this order.
+# Colours (RGB in [0, 1]) of the raster layers, painted in this order; the predicted-future
+# layers (rasters drawn with predict_s > 0) go under the present boxes.
 _PALETTE = (
     ("drivable", (0.36, 0.38, 0.42)),
     ("lane_centre", (0.45, 0.60, 0.80)),
     ("lane_dashed", (0.92, 0.92, 0.92)),
     ("lane_solid", (1.00, 1.00, 1.00)),
+    ("signal_red", (1.00, 0.10, 0.10)),
+    ("agents_future", (0.75, 0.45, 1.00)),
     ("agents_history", (0.30, 0.55, 1.00)),
     ("ego_history", (1.00, 0.45, 0.35)),
     ("agents", (0.15, 0.45, 1.00)),
@@ -37,10 +40,14 @@ def _save(fig, path: Path) -> Path:
 
 
 def raster_to_rgb(raster: np.ndarray) -> np.ndarray:
-    """uint8 [C, H, W] raster into an RGB float image [H, W, 3]: each layer alpha-blended on top."""
+    """uint8 [C, H, W] raster into an RGB float image [H, W, 3]: each layer alpha-blended on top.
+    C is 8 (`CHANNELS`) or 10 (with `FUTURE_CHANNELS`)."""
     rgb = np.broadcast_to(np.array(_BACKGROUND), raster.shape[1:] + (3,)).copy()
+    index = {name: i for i, name in enumerate(CHANNELS + FUTURE_CHANNELS[:len(raster) - len(CHANNELS)])}
     for name, colour in _PALETTE:
-        alpha = raster[CHANNEL_INDEX[name]].astype(np.float64)[..., None] / 255.0
+        if name not in index:
+            continue
+        alpha = raster[index[name]].astype(np.float64)[..., None] / 255.0
         rgb = rgb * (1 - alpha) + np.array(colour) * alpha
     return rgb
 
@@ -64,7 +71,9 @@ def save_scene_png(scene: Scene, config: RasterConfig, path: Path, title: str = 
     fig, ax = plt.subplots(figsize=(6.2, 6.4), dpi=110)
     ax.imshow(raster_to_rgb(rasterize_scene(scene, config)), interpolation="nearest",
               extent=(ext.left_m, -ext.right_m, -ext.back_m, ext.front_m), aspect="auto")
-    handles = [Patch(color=c, label=n.replace("_", " ")) for n, c in _PALETTE if n != "lane_centre"]
+    shown = CHANNELS + (FUTURE_CHANNELS if config.predict_s > 0 else ())
+    handles = [Patch(color=c, label=n.replace("_", " ")) for n, c in _PALETTE
+               if n != "lane_centre" and n in shown]
     if scene.num_future_steps and scene.valid[scene.ego_index, scene.current_index + 1:].all():
         origin, heading = ego_pose(scene)
         future = ego_from_world(scene.ego_future_xy(), origin, heading)
