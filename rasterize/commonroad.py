@@ -13,24 +13,57 @@ east and y north, like the toolkit's, so positions and orientations pass through
   unwrapped angle) onto the toolkit's grid of times; times outside a vehicle's record are
   invalid, which is how vehicles entering and leaving the recording show up.
 - The ego's route (`Scene.route_xy`) follows the centre line of the lanelet the ego is on and its
-  successors, cut by the same goal rule as simulated data (`rasterize.highway.RouteRule`): only
-  present information, never the recorded future.
+  successors, cut by the same goal rule as simulated data (`rasterize.highway.RouteRule`). Where a
+  lanelet has several successors (an intersection) the route takes the one the recorded vehicle
+  took (`RecordedTraffic.successor_taken`: the successor holding most of its recorded positions;
+  the lowest id when its record never reaches one): that is the navigation intent a deployed car
+  has, not a position or speed of the recorded future. Where lanelets overlap (inside an
+  intersection) the route starts on the one within 45 degrees of the heading that the recorded
+  vehicle used most; NGSIM tracks that leave the mapped turning lanelets use one within 3.5 m, and
+  with none the route runs straight along the heading (`_lanelet_under`). A lanelet without
+  successors ends the route.
+- Traffic lights (`LaneletLight`, `lanelet_lights`): every (lanelet, light) pair of the lanelet
+  network, at the lanelet's stop line (its `stop_line`, else the segment between the end points of
+  its left and right bounds), with the light's cycle. The cycle is periodic, so it continues before
+  and beyond the recording. A light forbids passing ("red") in every state but green and inactive:
+  amber (yellow) and red-amber count as red. A light without a cycle has no known state: it is
+  left out (not drawn, never red) with a one-time warning naming the file and the light.
+  `Scene.signals` holds one `Signal` per (lanelet, light) whose stop line lies within the scene's
+  extent (`CommonRoadSceneConfig.extent`), with its state every `dt_s` from now to `future_s`.
+  Which light governs a vehicle depends on its turn (a light's direction: left, straight, right or
+  combinations, `all`); a movement is red when one of the lights governing it is red and none of
+  them is green (`movement_red`), so a green right-turn arrow lets a vehicle turn right on red.
+- Goal rule at signals (`route_on_lanelets`): while the next signal on the route is red (for the
+  route's turn) at the time the ego would reach its stop line (keeping its speed and gaining the
+  rule's acceleration up to the limit), the goal point is held `stop_gap_m` (2 m) before the stop
+  line, and never so close that the ego's front would be less than 0.5 m from it; once the light
+  is green at arrival the goal passes through. A moving ego that cannot stop at the line braking
+  3 m/s² (amber caught it) is committed and goes on; a waiting one whose front is past the mapped
+  line (NGSIM drivers stop about 2 m past it) is held where it is (`red_light_hold`).
 
 Raster family: recorded highway traffic uses the highway extent (200 m ahead, 40 m behind, 20 m a
 side; `rasterize.config.FAMILY_EXTENTS`), so the shipped highway planner reads these scenes as it
 reads simulated ones. NGSIM speeds (mostly below 15 m/s) keep the 6 s future well inside it.
+Urban recordings (Lankershim) get an extent derived from their own data
+(`riskmap.data.collect_commonroad.derive_settings`): less ahead, wide to the sides for turns.
 """
 
 from __future__ import annotations
 
+import logging
+from collections import Counter
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
+from rasterize.config import Extent
 from rasterize.errors import InputError
 from rasterize.highway import RouteRule
-from rasterize.scene import STATE_DIM, AgentKind, Lane, LineType, Scene
+from rasterize.scene import STATE_DIM, AgentKind, Lane, LineType, Scene, Signal
+
+log = logging.getLogger(__name__)
 
 # Obstacle types that drive: they may be demonstrators, and they are VEHICLE agents.
 VEHICLE_TYPES = ("car", "truck", "bus", "motorcycle", "taxi", "priorityVehicle")
@@ -49,11 +82,16 @@ class CommonRoadSceneConfig:
     # The route rule's speed limit when the file gives none: 65 mph, the US-101 / I-80 limit.
     speed_limit_mps: float = 29.06
     route_rule: RouteRule = field(default_factory=RouteRule)
+    # Signals whose stop line lies in this ego-centred rectangle are in the scene (the raster's
+    # extent); None: those within `lane_radius_m` of the ego.
+    extent: Extent | None = None
+    # At a red light the goal point is held this far before the stop line (`red_light_hold`).
+    stop_gap_m: float = 2.0
 
     def __post_init__(self) -> None:
-        for name in ("history_s", "future_s"):
+        for name in ("history_s", "future_s", "stop_gap_m"):
             if not getattr(self, name) >= 0:
-                raise InputError(f"CommonRoadSceneConfig.{name} must be >= 0 seconds")
+                raise InputError(f"CommonRoadSceneConfig.{name} must be >= 0")
         for name in ("dt_s", "radius_m", "lane_radius_m", "speed_limit_mps"):
             if not getattr(self, name) > 0:
                 raise InputError(f"CommonRoadSceneConfig.{name} must be positive")
@@ -158,6 +196,187 @@ def lanes_from_lanelets(network, centre_world: np.ndarray | None = None,
     return tuple(lanes)
 
 
+# --- traffic lights ------------------------------------------------------------------------------
+
+# Light states that let a vehicle pass; every other state (red, yellow, redYellow) forbids it.
+GO_STATES = ("green", "inactive")
+TURNS = ("left", "straight", "right")
+# CommonRoad's light directions -> the turns they govern.
+DIRECTION_TURNS = {
+    "right": frozenset({"right"}), "straight": frozenset({"straight"}), "left": frozenset({"left"}),
+    "leftStraight": frozenset({"left", "straight"}), "straightRight": frozenset({"straight", "right"}),
+    "leftRight": frozenset({"left", "right"}), "all": frozenset(TURNS),
+}
+_WARNED: set[tuple[str, int]] = set()     # (file, light id) already warned about
+
+
+@dataclass(frozen=True, eq=False)
+class LaneletLight:
+    """One traffic light at one lanelet's stop line, with its cycle (module doc).
+
+    stop_line [2, 2] world m; forward [2]: the lanelet's unit driving direction at its stop line;
+    turns: the turns the light governs (subset of `TURNS`); states [E] and durations_steps [E]:
+    the cycle's elements (CommonRoad colour names, time steps of `dt_s` s); offset_steps: the
+    recording step at which the cycle's first element starts (the cycle repeats before and after).
+    """
+
+    lanelet_id: int
+    light_id: int
+    stop_line: np.ndarray
+    forward: np.ndarray
+    turns: frozenset
+    states: tuple[str, ...]
+    durations_steps: tuple[int, ...]
+    offset_steps: int
+    dt_s: float
+
+    def state_at(self, t_s) -> np.ndarray:
+        """The light's state (colour name) at times `t_s` (seconds from the recording's step 0),
+        as CommonRoad's `TrafficLightCycle.get_state_at_time_step` gives it at that step."""
+        steps = np.floor(np.asarray(t_s, dtype=np.float64) / self.dt_s + 1e-6).astype(np.int64)
+        ends = np.cumsum(self.durations_steps)
+        phase = (steps - self.offset_steps) % ends[-1]
+        return np.asarray(self.states, dtype=object)[np.searchsorted(ends, phase, side="right")]
+
+    def red_at(self, t_s) -> np.ndarray:
+        """Whether the light forbids passing at times `t_s` (s from the recording's step 0): every
+        state but green and inactive, so amber counts as red."""
+        state = self.state_at(t_s)
+        return ~np.isin(state, GO_STATES)
+
+    def green_at(self, t_s) -> np.ndarray:
+        return self.state_at(t_s) == "green"
+
+    def signal(self, now_s: float, times_s: np.ndarray) -> Signal:
+        """The `Signal` of this light `times_s` seconds after `now_s`."""
+        return Signal(self.stop_line, times_s, self.red_at(now_s + np.asarray(times_s)))
+
+
+def movement_red(lights: Sequence[LaneletLight], t_s: float) -> bool:
+    """Whether passing the stop line is forbidden at `t_s` for a movement governed by `lights`:
+    one of them is red and none is green (a green arrow overrides a red ball; inactive lights
+    do not govern). No lights: not red."""
+    t = np.array([t_s])
+    return (any(bool(light.red_at(t)[0]) for light in lights)
+            and not any(bool(light.green_at(t)[0]) for light in lights))
+
+
+def _light_cycle(light) -> tuple[tuple[str, ...], tuple[int, ...], int] | None:
+    """(states, durations, offset) of a CommonRoad light's cycle; None when it has no usable one."""
+    cycle = getattr(light, "traffic_light_cycle", None)
+    elements = list(getattr(cycle, "cycle_elements", None) or [])
+    if not elements:
+        return None
+    states = tuple(str(getattr(e.state, "value", e.state)) for e in elements)
+    durations = tuple(int(e.duration) for e in elements)
+    if any(d < 0 for d in durations) or sum(durations) <= 0:
+        return None
+    return states, durations, int(getattr(cycle, "time_offset", 0) or 0)
+
+
+def _warn_once(name: str, light_id: int, why: str) -> None:
+    if (name, light_id) not in _WARNED:
+        _WARNED.add((name, light_id))
+        log.warning("CommonRoad file %s: traffic light %d %s; its state is unknown, so it is left "
+                    "out of the scenes (not drawn, never red)", name, light_id, why)
+
+
+def _stop_line_of(lanelet) -> np.ndarray:
+    """[2, 2]: the lanelet's stop line, or the segment between the end points of its bounds."""
+    line = getattr(lanelet, "stop_line", None)
+    start, end = getattr(line, "start", None), getattr(line, "end", None)
+    if start is not None and end is not None:
+        points = np.array([np.asarray(start, float).reshape(-1)[:2], np.asarray(end, float).reshape(-1)[:2]])
+        if np.isfinite(points).all() and np.linalg.norm(points[1] - points[0]) > 1e-6:
+            return points
+    return np.array([np.asarray(lanelet.left_vertices[-1], float)[:2],
+                     np.asarray(lanelet.right_vertices[-1], float)[:2]])
+
+
+def _direction_at(centre: np.ndarray, point: np.ndarray) -> np.ndarray:
+    """Unit direction [2] of a centre line at the segment nearest `point`."""
+    a, b = centre[:-1], centre[1:]
+    ab = b - a
+    t = np.clip(((point - a) * ab).sum(axis=1) / np.maximum((ab * ab).sum(axis=1), 1e-12), 0, 1)
+    seg = int(np.argmin(np.linalg.norm(a + t[:, None] * ab - point, axis=1)))
+    d = ab[seg]
+    return d / max(float(np.linalg.norm(d)), 1e-12)
+
+
+def lanelet_lights(network, dt_s: float, name: str = "") -> tuple[LaneletLight, ...]:
+    """Every (lanelet, traffic light) pair of a lanelet network with a known cycle, ordered by
+    lanelet and light id. A light without a cycle (or referenced but missing) is left out with a
+    one-time warning naming the file (`name`) and the light (module doc)."""
+    out = []
+    for lanelet in sorted(network.lanelets, key=lambda ll: ll.lanelet_id):
+        refs = set(getattr(lanelet, "traffic_lights", None) or ())
+        refs |= set(getattr(getattr(lanelet, "stop_line", None), "traffic_light_ref", None) or ())
+        if not refs:
+            continue
+        stop_line = _stop_line_of(lanelet)
+        forward = _direction_at(np.asarray(lanelet.center_vertices, float), stop_line.mean(axis=0))
+        for light_id in sorted(refs):
+            light = network.find_traffic_light_by_id(light_id)
+            if light is None:
+                _warn_once(name, int(light_id), f"(lanelet {lanelet.lanelet_id}) is not in the file")
+                continue
+            cycle = _light_cycle(light)
+            if cycle is None:
+                _warn_once(name, int(light_id), "has no cycle")
+                continue
+            direction = str(getattr(getattr(light, "direction", None), "value", "all") or "all")
+            out.append(LaneletLight(int(lanelet.lanelet_id), int(light_id), stop_line, forward,
+                                    DIRECTION_TURNS.get(direction, frozenset(TURNS)), *cycle,
+                                    dt_s=float(dt_s)))
+    return tuple(out)
+
+
+def turn_between(network, from_id: int, to_id: int) -> str:
+    """The turn ("left", "straight", "right") from lanelet `from_id` into its successor `to_id`:
+    as an intersection of the file declares it, else from the heading change along the successor
+    (more than 30 degrees: a turn)."""
+    for intersection in getattr(network, "intersections", None) or ():
+        for incoming in getattr(intersection, "incomings", None) or ():
+            if from_id not in set(getattr(incoming, "incoming_lanelets", None) or ()):
+                continue
+            for turn in TURNS:
+                if to_id in set(getattr(incoming, f"outgoing_{turn}", None)
+                                or getattr(incoming, f"successors_{turn}", None) or ()):
+                    return turn
+    a = np.asarray(network.find_lanelet_by_id(from_id).center_vertices, float)
+    b = np.asarray(network.find_lanelet_by_id(to_id).center_vertices, float)
+    d0, d1 = a[-1] - a[-2], b[-1] - b[-2]
+    change = float(np.degrees(np.arctan2(d0[0] * d1[1] - d0[1] * d1[0], float(np.dot(d0, d1)))))
+    return "left" if change > 30.0 else "right" if change < -30.0 else "straight"
+
+
+def governing(lights: Sequence[LaneletLight], turn: str | None) -> list[LaneletLight]:
+    """The lights of one stop line that govern a vehicle making `turn` (None: unknown turn, all
+    of them)."""
+    return [light for light in lights if turn is None or turn in light.turns]
+
+
+def lights_in_extent(lights: Sequence[LaneletLight], ego_state: np.ndarray, extent: Extent | None,
+                     radius_m: float) -> list[LaneletLight]:
+    """The lights whose stop line lies (an end or its middle) inside `extent` around the ego
+    (ego frame: x ahead, y left), or within `radius_m` of the ego when `extent` is None."""
+    out = []
+    heading = float(np.arctan2(ego_state[3], ego_state[2]))
+    c, s = np.cos(heading), np.sin(heading)
+    for light in lights:
+        points = np.concatenate([light.stop_line, light.stop_line.mean(axis=0, keepdims=True)])
+        rel = points - ego_state[:2]
+        if extent is None:
+            inside = _distance_to_polyline(ego_state[:2], light.stop_line) <= radius_m
+        else:
+            x, y = rel[:, 0] * c + rel[:, 1] * s, -rel[:, 0] * s + rel[:, 1] * c
+            inside = bool(((x <= extent.front_m) & (x >= -extent.back_m)
+                           & (y <= extent.left_m) & (y >= -extent.right_m)).any())
+        if inside:
+            out.append(light)
+    return out
+
+
 # --- recorded traffic ----------------------------------------------------------------------------
 
 def _box_of(shape) -> tuple[float, float]:
@@ -254,6 +473,9 @@ class RecordedTraffic:
     same filter's derivative of the positions, so speed and displacement agree.
     A vehicle whose record is not finite or jumps (a step implying more than `MAX_SPEED_MPS`)
     cannot be placed: it is left out of the arrays and its id listed in `rejected` with why.
+
+    `lights`: the lanelet network's (lanelet, traffic light) pairs with a known cycle
+    (`lanelet_lights`), `lights_by_lanelet` the same by lanelet id.
     """
 
     def __init__(self, scenario, name: str = "", smoothing_s: float = 0.0):
@@ -261,6 +483,11 @@ class RecordedTraffic:
         self.dt_s = float(scenario.dt)
         self.smoothing_s = float(smoothing_s)
         self.rejected: dict[int, str] = {}
+        self.lights = lanelet_lights(scenario.lanelet_network, self.dt_s, self.name)
+        self.lights_by_lanelet: dict[int, tuple[LaneletLight, ...]] = {}
+        for light in self.lights:
+            self.lights_by_lanelet[light.lanelet_id] = self.lights_by_lanelet.get(light.lanelet_id, ()) + (light,)
+        self._lanelet_counts: dict[int, Counter] = {}
         obstacles, records = [], []
         for obstacle in sorted(scenario.dynamic_obstacles, key=lambda o: o.obstacle_id):
             record = _recorded_states(obstacle)
@@ -351,6 +578,42 @@ class RecordedTraffic:
             valid[i, inside] = True
         return out, valid
 
+    def lanelet_counts(self, agent: int) -> Counter:
+        """How many of the agent's recorded positions lie in each lanelet (lanelet id -> count)."""
+        if agent not in self._lanelet_counts:
+            first, last = self.span(agent)
+            points = [p for p in self.states[agent, first: last + 1, :2]]
+            found = self.scenario.lanelet_network.find_lanelet_by_position(points)
+            self._lanelet_counts[agent] = Counter(int(i) for ids in found for i in ids)
+        return self._lanelet_counts[agent]
+
+    def successor_taken(self, agent: int, successors: Sequence[int]) -> int:
+        """Of a lanelet's `successors`, the one recorded vehicle `agent` took: the one holding most
+        of its recorded positions (the lowest id when it reaches none of them in its record)."""
+        counts = self.lanelet_counts(agent)
+        return max(sorted(successors), key=lambda s: (counts.get(int(s), 0), -int(s)))
+
+    def route(self, agent: int, state: np.ndarray, others: np.ndarray, other_lengths_m: np.ndarray,
+              now_s: float, config: CommonRoadSceneConfig) -> np.ndarray:
+        """The route rule's route [points, 2] for recorded vehicle `agent` in `state` at `now_s`
+        (seconds from step 0) among `others` [M, 6]: on the lanelets it was recorded to use
+        (where lanelets overlap) and through intersections the way it was recorded to go, held
+        before a red light (`route_on_lanelets`)."""
+        return route_on_lanelets(self.scenario.lanelet_network, state, self.sizes[agent, 0], others,
+                                 other_lengths_m, config.route_rule, config.speed_limit_mps,
+                                 successor=lambda succ: self.successor_taken(agent, succ),
+                                 rank=lambda lanelet_id: self.lanelet_counts(agent).get(lanelet_id, 0),
+                                 lights=self.lights_by_lanelet, now_s=now_s,
+                                 stop_gap_m=config.stop_gap_m)
+
+    def scene_signals(self, ego_state: np.ndarray, now_s: float,
+                      config: CommonRoadSceneConfig) -> tuple[Signal, ...]:
+        """One `Signal` per (lanelet, light) whose stop line lies within the scene's extent around
+        `ego_state`, its state every `config.dt_s` from `now_s` (s from step 0) to `future_s`."""
+        times = config.dt_s * np.arange(0, int(np.floor(config.future_s / config.dt_s + 1e-9)) + 1)
+        return tuple(light.signal(now_s, times) for light in
+                     lights_in_extent(self.lights, ego_state, config.extent, config.lane_radius_m))
+
     def window_steps(self, agent: int, config: CommonRoadSceneConfig, stride_s: float) -> list[int]:
         """Current time steps at which `agent` has its full history and future recorded, one every
         `stride_s` from its first possible step."""
@@ -382,35 +645,65 @@ class RecordedTraffic:
         network = self.scenario.lanelet_network
         if lanes is None:
             lanes = lanes_from_lanelets(network, ego_xy, config.lane_radius_m)
-        route = route_on_lanelets(network, self.states[ego, time_index], self.sizes[ego, 0],
-                                  self.states[agents[1:], time_index], self.sizes[agents[1:], 0],
-                                  config.route_rule, config.speed_limit_mps)
+        route = self.route(ego, self.states[ego, time_index], self.states[agents[1:], time_index],
+                           self.sizes[agents[1:], 0], now_s, config)
         return Scene(states, valid, self.sizes[agents], self.kinds[agents], ego_index=0,
                      current_index=config.history_steps, dt=config.dt_s, lanes=lanes,
-                     source=f"commonroad:{self.name}", time_s=now_s, route_xy=route)
+                     source=f"commonroad:{self.name}", time_s=now_s, route_xy=route,
+                     signals=self.scene_signals(self.states[ego, time_index], now_s, config))
 
 
 # --- the ego's route ahead -------------------------------------------------------------------------
 
-def _lanelet_under(network, state: np.ndarray):
-    """The lanelet the vehicle is on, preferring the one whose direction matches its heading."""
+def _heading_cos(lanelet, state: np.ndarray) -> float:
+    """Cosine between the vehicle's heading and the lanelet's direction at the nearest segment."""
+    centre = np.asarray(lanelet.center_vertices)
+    seg = np.argmin(np.linalg.norm(centre[:-1] - state[:2], axis=1))
+    d = centre[seg + 1] - centre[seg]
+    return float(np.dot(d, state[2:4]) / max(np.linalg.norm(d), 1e-9))
+
+
+ALIGNED_COS = float(np.cos(np.pi / 4))   # a lanelet within 45 degrees of the heading is driven along
+NEAR_LANELET_M = 3.5                     # recorded positions may lie beside the mapped lanelets
+
+
+def _lanelet_under(network, state: np.ndarray, rank: Callable[[int], float] | None = None):
+    """The lanelet the vehicle is on, preferring the one whose direction matches its heading.
+
+    With `rank` (lanelet id -> score: a recorded vehicle's use of each lanelet) only lanelets
+    within 45 degrees of the heading count: among those under the vehicle the highest score,
+    then the best heading; with none under it, the same among those whose centre line is within
+    `NEAR_LANELET_M` (NGSIM tracks inside intersections leave the mapped turning lanelets); with
+    none there either, None (off the lanelets). Without `rank`: the best heading under it."""
     ids = network.find_lanelet_by_position([np.asarray(state[:2])])[0]
+    if rank is not None:
+        under = [network.find_lanelet_by_id(i) for i in ids]
+        aligned = [ll for ll in under if _heading_cos(ll, state) > ALIGNED_COS]
+        if not aligned:
+            aligned = [ll for ll in network.lanelets
+                       if _distance_to_polyline(np.asarray(state[:2]), np.asarray(ll.center_vertices))
+                       <= NEAR_LANELET_M and _heading_cos(ll, state) > ALIGNED_COS]
+        return max(aligned, key=lambda ll: (rank(int(ll.lanelet_id)), _heading_cos(ll, state)),
+                   default=None)
     best, best_cos = None, -np.inf
     for lanelet_id in ids:
         lanelet = network.find_lanelet_by_id(lanelet_id)
-        centre = np.asarray(lanelet.center_vertices)
-        seg = np.argmin(np.linalg.norm(centre[:-1] - state[:2], axis=1))
-        d = centre[seg + 1] - centre[seg]
-        cos = float(np.dot(d, state[2:4]) / max(np.linalg.norm(d), 1e-9))
+        cos = _heading_cos(lanelet, state)
         if cos > best_cos:
             best, best_cos = lanelet, cos
     return best
 
 
-def _centre_line_ahead(network, state: np.ndarray, length_m: float) -> np.ndarray | None:
+def _centre_line_ahead(network, state: np.ndarray, length_m: float,
+                       successor: Callable[[Sequence[int]], int] | None = None,
+                       rank: Callable[[int], float] | None = None
+                       ) -> tuple[np.ndarray, list[int]] | None:
     """The centre line [K, 2] from the vehicle's projection on its lanelet through the lanelet's
-    successors (lowest id first) for at least `length_m`, or None off the lanelets."""
-    lanelet = _lanelet_under(network, state)
+    successors for at least `length_m`, and the ids of the lanelets it runs along, or None off the
+    lanelets. `successor` picks one of several successors (default: the lowest id), `rank` the
+    lanelet it is on among overlapping ones (`_lanelet_under`); a lanelet without successors ends
+    the line."""
+    lanelet = _lanelet_under(network, state, rank)
     if lanelet is None:
         return None
     centre = np.asarray(lanelet.center_vertices, dtype=np.float64)
@@ -421,38 +714,143 @@ def _centre_line_ahead(network, state: np.ndarray, length_m: float) -> np.ndarra
     seg = int(np.argmin(np.linalg.norm(proj - state[:2], axis=1)))
     points = [proj[seg][None], centre[seg + 1:]]
     total = _arc_length(np.concatenate(points))
-    seen = {lanelet.lanelet_id}
+    ids = [int(lanelet.lanelet_id)]
     while total < length_m and lanelet.successor:
-        nxt = min(s for s in lanelet.successor)
-        if nxt in seen:
+        successors = [int(s) for s in lanelet.successor]
+        nxt = min(successors) if successor is None or len(successors) == 1 else int(successor(successors))
+        if nxt in ids:
             break
-        seen.add(nxt)
+        ids.append(nxt)
         lanelet = network.find_lanelet_by_id(nxt)
         more = np.asarray(lanelet.center_vertices, dtype=np.float64)
         points.append(more)
         total += _arc_length(more)
     line = np.concatenate(points)
     keep = np.concatenate([[True], np.linalg.norm(np.diff(line, axis=0), axis=1) > 1e-6])
-    return line[keep]
+    return line[keep], ids
+
+
+def _first_crossing(line: np.ndarray, s_line: np.ndarray, segment: np.ndarray,
+                    margin_m: float = 0.5) -> float | None:
+    """Arc length along polyline `line` (cumulative lengths `s_line`) where it first crosses
+    `segment` [2, 2] (extended by `margin_m` at both ends), or None."""
+    p, r = segment[0], segment[1] - segment[0]
+    length = float(np.linalg.norm(r))
+    if length < 1e-9:
+        return None
+    u_pad = margin_m / length
+    a, d = line[:-1], np.diff(line, axis=0)
+    denom = d[:, 0] * r[1] - d[:, 1] * r[0]
+    ok = np.abs(denom) > 1e-12
+    q = p - a
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = (q[:, 0] * r[1] - q[:, 1] * r[0]) / denom          # along the route segment
+        u = (q[:, 0] * d[:, 1] - q[:, 1] * d[:, 0]) / denom    # along the stop line
+    hits = np.flatnonzero(ok & (t >= 0) & (t <= 1) & (u >= -u_pad) & (u <= 1 + u_pad))
+    if hits.size == 0:
+        return None
+    k = int(hits[0])
+    return float(s_line[k] + t[k] * (s_line[k + 1] - s_line[k]))
+
+
+def time_to_cover(distance_m: float, speed_mps: float, accel_mps2: float, limit_mps: float) -> float:
+    """Seconds to drive `distance_m` from `speed_mps`, gaining `accel_mps2` up to `limit_mps`
+    (inf when standing without acceleration)."""
+    if distance_m <= 0:
+        return 0.0
+    v0 = max(speed_mps, 0.0)
+    top = max(limit_mps, v0)
+    if accel_mps2 <= 0 or v0 >= top:
+        return distance_m / v0 if v0 > 0 else float("inf")
+    t_top = (top - v0) / accel_mps2
+    d_top = v0 * t_top + 0.5 * accel_mps2 * t_top ** 2
+    if distance_m <= d_top:
+        return float((-v0 + np.sqrt(v0 * v0 + 2.0 * accel_mps2 * distance_m)) / accel_mps2)
+    return t_top + (distance_m - d_top) / top
+
+
+FRONT_MARGIN_M = 0.5     # a held goal keeps the ego's front at least this far before the line
+CREEP_MPS = 1.0          # at most this fast, a vehicle past a stop line is waiting, not committed
+COMMIT_DECEL_MPS2 = 3.0  # a moving vehicle that needs more than this to stop at the line goes
+
+
+def red_light_hold(network, line: np.ndarray, s_line: np.ndarray, ids: Sequence[int],
+                   lights: Mapping[int, Sequence[LaneletLight]], ego_state: np.ndarray,
+                   ego_length_m: float, now_s: float, rule: RouteRule, speed_limit_mps: float,
+                   stop_gap_m: float, reach_m: float) -> float | None:
+    """Route distance (m from the ego's centre, >= 0) at which the goal is held before a red
+    light, or None.
+
+    The signals of the route's lanelets (`ids`, and the lanelet before the first, whose stop line
+    the ego may be straddling) are visited in route order while their hold point is within
+    `reach_m`. The first stop line that the ego's rear has not passed, whose lights (for the
+    route's turn there) are red when the ego's front would reach it, holds the goal point
+    `stop_gap_m` before the line, and at least `FRONT_MARGIN_M` farther back than half the ego's
+    length, so that an ego at its goal has not put its front across the line (an ego already
+    closer than that is held where it is). A moving ego (faster than `CREEP_MPS`) that cannot stop
+    its front at the line braking `COMMIT_DECEL_MPS2` is committed: that signal does not hold.
+    Recorded drivers wait with their front past the mapped stop line (NGSIM: by about 2 m), so a
+    front past the line alone does not commit a slow one."""
+    speed = max(float(ego_state[4]), 0.0)
+    half = 0.5 * ego_length_m
+    # Look behind the ego's centre as far as its rear (and a metre more).
+    back = half + 1.0
+    line = np.concatenate([ego_state[None, :2] - back * ego_state[2:4], line])
+    s_line = np.concatenate([[-back], s_line])
+    first = network.find_lanelet_by_id(ids[0]) if ids else None
+    visits = [(int(p), ids[0]) for p in (getattr(first, "predecessor", None) or ()) if int(p) in lights]
+    visits += [(lanelet_id, ids[k + 1] if k + 1 < len(ids) else None) for k, lanelet_id in enumerate(ids)]
+    for lanelet_id, nxt in visits:
+        if lanelet_id not in lights:
+            continue
+        turn = turn_between(network, lanelet_id, nxt) if nxt is not None else None
+        governed = governing(lights[lanelet_id], turn)
+        if not governed:
+            continue
+        s_stop = _first_crossing(line, s_line, governed[0].stop_line)
+        if s_stop is None:
+            continue
+        if s_stop <= -half:
+            continue                                    # the rear is past: behind the ego
+        front_to_line = s_stop - half
+        if speed > CREEP_MPS and front_to_line < speed * speed / (2.0 * COMMIT_DECEL_MPS2):
+            continue                                    # cannot stop comfortably: committed
+        hold = s_stop - max(stop_gap_m, half + FRONT_MARGIN_M)
+        if hold > reach_m:
+            break
+        arrival = now_s + time_to_cover(max(front_to_line, 0.0), speed, rule.accel_mps2,
+                                        speed_limit_mps)
+        if np.isfinite(arrival) and movement_red(governed, arrival):
+            return max(0.0, hold)
+    return None
 
 
 def route_on_lanelets(network, ego_state: np.ndarray, ego_length_m: float, others: np.ndarray,
                       other_lengths_m: np.ndarray, rule: RouteRule | None = None,
-                      speed_limit_mps: float = 29.06) -> np.ndarray:
+                      speed_limit_mps: float = 29.06, *,
+                      successor: Callable[[Sequence[int]], int] | None = None,
+                      rank: Callable[[int], float] | None = None,
+                      lights: Mapping[int, Sequence[LaneletLight]] | None = None,
+                      now_s: float = 0.0, stop_gap_m: float = 2.0) -> np.ndarray:
     """[rule.points, 2] world points from the ego along its lane to its goal (the route rule).
 
     Free distance = min(limit × T, v × T + a T² / 2); a leader within the rule's half-width of the
-    route caps it at the leader's position after T less a standstill gap and a time headway.
-    Off the lanelets the route runs straight ahead along the ego's heading.
+    route caps it at the leader's position after T less a standstill gap and a time headway; a red
+    light ahead (`lights` by lanelet id, states at `now_s` s from the recording's step 0) holds it
+    before its stop line (`red_light_hold`). `successor` picks the way through intersections
+    (default: the lowest successor id) and `rank` the lanelet the ego is on where lanelets
+    overlap (default: the best heading). Off the lanelets the route runs straight ahead along the
+    ego's heading.
     """
     rule = rule or RouteRule()
     t = rule.horizon_s
     speed = max(float(ego_state[4]), 0.0)
     free = min(speed_limit_mps * t, speed * t + 0.5 * rule.accel_mps2 * t * t)
     reach = free + 40.0                                   # look for leaders a little further
-    line = _centre_line_ahead(network, ego_state, reach)
+    ahead = _centre_line_ahead(network, ego_state, reach, successor, rank)
+    line, ids = ahead if ahead is not None else (None, [])
     if line is None or len(line) < 2:
-        line = np.stack([ego_state[:2], ego_state[:2] + reach * ego_state[2:4]])
+        line, ids = np.stack([ego_state[:2], ego_state[:2] + reach * ego_state[2:4]]), []
     line = np.concatenate([ego_state[None, :2], line[1:]]) if len(line) > 1 else line
     s_line = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(line, axis=0), axis=1))])
     along = np.arange(0.0, reach + rule.sample_m, rule.sample_m)
@@ -471,6 +869,11 @@ def route_on_lanelets(network, ego_state: np.ndarray, ego_length_m: float, other
         gap = along[j] - 0.5 * (ego_length_m + float(length))
         cap = gap + v_lead * t - (rule.standstill_gap_m + v_lead * rule.headway_s)
         distance = min(distance, max(0.0, cap))
+    if lights and ids:
+        held = red_light_hold(network, line, s_line, ids, lights, ego_state, ego_length_m, now_s,
+                              rule, speed_limit_mps, stop_gap_m, reach_m=free)
+        if held is not None:
+            distance = min(distance, held)
     ds = np.linspace(0.0, distance, rule.points)
     return np.stack([np.interp(ds, along, dense[:, 0]), np.interp(ds, along, dense[:, 1])], axis=1)
 

@@ -11,8 +11,19 @@ in several files. Here:
   once. Tracks that are not finite or jump are left out by `RecordedTraffic` and counted.
 - A demonstrator's windows (2 s history, 6 s future at 2 Hz) start at every step its record
   allows, one per second (`window_stride_s`).
-- Each demonstrator is one shard ("episode") whose info names its `group` (the site and
-  configuration number, `recording_group`), so `riskmap train` holds out whole configurations.
+- Each demonstrator is one shard ("episode") whose info names its `group`, so `riskmap train`
+  holds out whole moments of traffic (`traffic_groups`): the site and configuration number of
+  the file name (`recording_group`: `USA_US101-10` for `USA_US101-10_3_T-1`). Where the files of
+  one configuration number hold several moments of traffic - Lankershim's number is its map
+  (`USA_Lanker-2_*` are many moments on one map) - each moment is its own group, named by the
+  configuration and its files' variant numbers (`USA_Lanker-2_15+23`). Files of one
+  configuration number are one moment when they share a recorded vehicle (obstacle id), so a
+  vehicle is never on both sides of a split within a configuration; US-101's configurations
+  each stay one group.
+- The raster family is the recordings' (`recorded_family`): `urban` for files tagged urban or
+  intersection or with traffic lights (Lankershim), else `highway` (US-101). Scenes of urban
+  recordings carry the traffic lights (`Scene.signals`) and their route rule waits at red
+  lights (`rasterize.commonroad`).
 - With `derive=True` (the default) the settings tuned to highway-env come from the recordings
   instead (`derive_settings`): the raster extent from how far the demonstrators drive in 6 s,
   the route rule's speed limit from the speeds driven, its acceleration as the one whose goal
@@ -43,7 +54,6 @@ from rasterize.commonroad import (
     RecordedTraffic,
     SetBasedRecording,
     load_scenario,
-    route_on_lanelets,
 )
 from rasterize.config import FAMILY_EXTENTS, Extent, RasterConfig
 from rasterize.errors import InputError
@@ -64,6 +74,13 @@ SOURCE = "commonroad"
 # NGSIM in CommonRoad: <country>_<site>-<configuration>_<variant>_<T|S>-<version>
 RECORDING_NAME = re.compile(r"^(?P<site>.+?)-(?P<configuration>\d+)_(?P<variant>\d+)_[TS]-\d+$")
 ROUTE_ACCELS_MPS2 = tuple(np.round(np.arange(0.0, 2.01, 0.25), 2))   # candidates for derive
+# Extents of the recorded families when they are not derived from the data: highway as
+# highway-env's; urban as derived from the NGSIM Lankershim recordings (120 m ahead: 15% beyond
+# the farthest 6 s drive, 97 m; 45 m a side: the widest turn, 38 m, plus a lane and 2 m).
+RECORDED_FAMILY_EXTENTS: dict[str, Extent] = {
+    "highway": FAMILY_EXTENTS["highway"],
+    "urban": FAMILY_EXTENTS.get("urban", Extent(front_m=120.0, back_m=30.0, left_m=45.0, right_m=45.0)),
+}
 
 
 @dataclass(frozen=True)
@@ -87,18 +104,20 @@ class CommonRoadCollectConfig:
     speed_limit_mps: float = 29.06     # route rule's limit when a file gives none (65 mph)
     route_accel_mps2: float = 1.0      # route rule's acceleration (rasterize.highway.RouteRule)
     derive: bool = True                # extent, speed limit and route acceleration from the data
-    family: str = "highway"            # raster extent family when not derived
+    # Raster family (extent when not derived): highway or urban; None: the recordings' own
+    # (`recorded_family`, filled in by `collect_commonroad`).
+    family: str | None = None
     raster: RasterConfig | None = None
     seed: int = 0
 
     def __post_init__(self) -> None:
-        if self.family not in FAMILY_EXTENTS:
-            raise InputError(f"family {self.family!r} unknown; choose one of "
-                             f"{', '.join(sorted(FAMILY_EXTENTS))}")
+        if self.family is not None and self.family not in RECORDED_FAMILY_EXTENTS:
+            raise InputError(f"family {self.family!r} unknown for recordings; choose one of "
+                             f"{', '.join(sorted(RECORDED_FAMILY_EXTENTS))}")
         if not self.smoothing_s >= 0:
             raise InputError(f"smoothing_s must be >= 0 seconds, got {self.smoothing_s}")
-        if self.raster is None:
-            object.__setattr__(self, "raster", RasterConfig(FAMILY_EXTENTS[self.family]))
+        if self.raster is None and self.family is not None:
+            object.__setattr__(self, "raster", RasterConfig(RECORDED_FAMILY_EXTENTS[self.family]))
         object.__setattr__(self, "files", tuple(tuple(f) for f in self.files))
 
     @property
@@ -110,13 +129,17 @@ class CommonRoadCollectConfig:
         return CommonRoadSceneConfig(self.history_s, self.future_s, self.window_dt_s,
                                      self.scene_radius_m, self.max_agents,
                                      speed_limit_mps=self.speed_limit_mps,
-                                     route_rule=RouteRule(accel_mps2=self.route_accel_mps2))
+                                     route_rule=RouteRule(accel_mps2=self.route_accel_mps2),
+                                     extent=None if self.raster is None else self.raster.extent)
 
     def to_dict(self) -> dict:
         data = asdict(self)
         data["files"] = [list(f) for f in self.files]
         data["env_id"] = SOURCE
         data["format_version"] = FORMAT_VERSION
+        # Who demonstrated: the recorded drivers. `riskmap.data.collect._check_out_dir` reads a
+        # manifest without this key as an IDM/MOBIL one, so it is always written.
+        data["human"] = "recorded"
         return data
 
 
@@ -197,6 +220,56 @@ class Demonstrator:
     group: str
 
 
+def _root(parent: dict, node):
+    """The representative of `node`'s set in a union-find `parent` map."""
+    while parent[node] != node:
+        node = parent[node]
+    return node
+
+
+def traffic_groups(traffics: dict[Path, RecordedTraffic]) -> dict[Path, str]:
+    """The group of every file (module doc): its configuration (`recording_group`) when all the
+    files of that configuration are one moment of traffic (linked by shared obstacle ids), else
+    its moment within the configuration, named `<configuration>_<variants joined by +>`."""
+    by_group: dict[str, list[Path]] = {}
+    for path in traffics:
+        by_group.setdefault(recording_group(path)[1], []).append(path)
+    out: dict[Path, str] = {}
+    for group, paths in by_group.items():
+        ids = {p: {int(o.obstacle_id) for o in traffics[p].scenario.dynamic_obstacles} for p in paths}
+        parent = {p: p for p in paths}
+        for k, a in enumerate(paths):
+            for b in paths[k + 1:]:
+                if ids[a] & ids[b]:
+                    parent[_root(parent, a)] = _root(parent, b)
+        moments: dict[Path, list[Path]] = {}
+        for p in paths:
+            moments.setdefault(_root(parent, p), []).append(p)
+        if len(moments) == 1:
+            out.update({p: group for p in paths})
+            continue
+        for members in moments.values():
+            variants = sorted((m["variant"] if (m := RECORDING_NAME.match(p.stem)) else p.stem
+                               for p in members), key=natural_key)
+            out.update({p: f"{group}_{'+'.join(variants)}" for p in members})
+    return out
+
+
+def natural_key(name: str) -> list:
+    """Sort key that orders `2` before `10` within names."""
+    return [int(part) if part.isdigit() else part for part in re.split(r"(\d+)", name)]
+
+
+def recorded_family(traffics: dict[Path, RecordedTraffic]) -> str:
+    """`urban` when a recording is tagged urban or intersection or has traffic lights, else
+    `highway`."""
+    for traffic in traffics.values():
+        tags = {str(getattr(t, "value", t)) for t in (getattr(traffic.scenario, "tags", None) or ())}
+        if tags & {"urban", "intersection"} or traffic.lights:
+            return "urban"
+    return "highway"
+
+
 def unique_demonstrators(files: list[Path], config: CommonRoadCollectConfig,
                          progress: bool = False) -> tuple[list[Demonstrator], dict, dict]:
     """Every recorded vehicle with a window, once (the first file that holds its track), the
@@ -204,8 +277,6 @@ def unique_demonstrators(files: list[Path], config: CommonRoadCollectConfig,
     from tqdm import tqdm
 
     traffics: dict[Path, RecordedTraffic] = {}
-    seen: set[tuple[str, str]] = set()
-    out: list[Demonstrator] = []
     skipped = {"duplicate_tracks": 0, "rejected_tracks": 0, "files_without_windows": 0,
                "set_based_files": 0}
     for path in tqdm(files, unit="file", disable=not progress, desc="read recordings"):
@@ -217,8 +288,12 @@ def unique_demonstrators(files: list[Path], config: CommonRoadCollectConfig,
             skipped["set_based_files"] += 1      # a folder may hold both kinds: use the _T ones
             continue
         traffics[path] = traffic
+    groups = traffic_groups(traffics)
+    seen: set[tuple[str, str]] = set()
+    out: list[Demonstrator] = []
+    for path, traffic in traffics.items():
         skipped["rejected_tracks"] += len(traffic.rejected)
-        group = recording_group(path)[1]
+        group = groups[path]
         found = demonstrators(traffic, config)
         skipped["files_without_windows"] += not found
         for agent, steps in found:
@@ -257,9 +332,8 @@ def _goal_error(traffic: RecordedTraffic, agent: int, step: int, scene: CommonRo
     the future horizon, in the human's frame at `step`."""
     state = traffic.states[agent, step]
     others = [a for a in present if a != agent]
-    route = route_on_lanelets(traffic.scenario.lanelet_network, state, traffic.sizes[agent, 0],
-                              traffic.states[others, step], traffic.sizes[others, 0],
-                              scene.route_rule, scene.speed_limit_mps)
+    route = traffic.route(agent, state, traffic.states[others, step], traffic.sizes[others, 0],
+                          step * traffic.dt_s, scene)
     end = traffic.states[agent, step + round(scene.future_s / traffic.dt_s), :2]
     heading = float(np.arctan2(state[3], state[2]))
     return ego_from_world(end[None], state[:2], heading)[0] - ego_from_world(route[-1:], state[:2], heading)[0]
@@ -323,6 +397,8 @@ def collect_commonroad(inputs: list[str | Path], out: Path, resume: bool = False
     demos, traffics, skipped = unique_demonstrators(files, config, progress)
     if not demos:
         raise InputError(no_demonstrators_message(files, config, skipped))
+    if config.family is None:
+        config = replace(config, family=recorded_family(traffics))
     derivation = None
     if config.derive:
         config, derivation = derive_settings(demos, traffics, config)

@@ -15,6 +15,11 @@ ones), then OUT/results.json and OUT/table.md with means and 90th percentiles.
 Safety % is the simulated scenes' (`riskmap.sim.metrics`: share of encounters with a recorded vehicle
 within 30 m that are dangerously close), per episode, then mean and 90th percentile; the share
 of episodes without a collision or leaving the road is reported beside it.
+Red-light violations (recordings with traffic lights: the ego's front crossing a stop line of
+its lane while the light for its turn is red, amber counted as red;
+`riskmap.sim.commonroad_replay`) are summed over the episodes beside the collisions, with the
+recorded humans' own count over the same episodes as the reference (`human`); records written
+before the count existed make it n/a.
 """
 
 from __future__ import annotations
@@ -93,9 +98,18 @@ def summarise(records: list[dict]) -> dict:
                           dtype=float)
         return {"mean": float(values.mean()), "p90": float(np.percentile(values, 90))}
 
+    def total(key):
+        values = [r.get(key) for r in records]
+        return None if any(v is None for v in values) else int(sum(values))
+
     return {"episodes": len(records),
             "safe_episodes_pct": 100.0 * float(np.mean([not (r["collided"] or r["off_road"])
                                                         for r in records])),
+            # Summed over the episodes; None when a record predates the count.
+            "red_light_violations": total("red_light_violations"),
+            "human_red_light_violations": total("human_red_light_violations"),
+            "red_light_violation_episodes": (None if total("red_light_violations") is None else
+                                             int(sum(r["red_light_violations"] > 0 for r in records))),
             "collision_rate": float(np.mean([r["collided"] for r in records])),
             # A log-replayed vehicle cannot see the ego: hit from behind is the replay's doing,
             # driving into a vehicle ahead the planner's (at fault).
@@ -106,15 +120,21 @@ def summarise(records: list[dict]) -> dict:
             **{key: stats(key) for key in METRICS}}
 
 
+def _count(value) -> str:
+    return "n/a" if value is None else str(value)
+
+
 def markdown_table(results: dict) -> str:
-    lines = ["| planner | episodes | Safety % | safe episodes % | collisions (at fault / struck from behind) | "
-             "off-road | ADE (m) | goal error (m) | driven (m) | human (m) |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+    lines = [("| planner | episodes | Safety % | safe episodes % | collisions (at fault / struck from "
+              "behind) | red-light violations (human) | off-road | ADE (m) | goal error (m) | "
+              "driven (m) | human (m) |"),
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for spec, s in results.items():
         lines.append(
             f"| {spec} | {s['episodes']} | {s['safety_pct']['mean']:.1f} / {s['safety_pct']['p90']:.1f} | "
             f"{s['safe_episodes_pct']:.0f} | "
             f"{100 * s['collision_rate']:.0f}% ({s['at_fault']} / {s['struck_from_behind']}) | "
+            f"{_count(s.get('red_light_violations'))} ({_count(s.get('human_red_light_violations'))}) | "
             f"{100 * s['off_road_rate']:.0f}% | {s['ade_m']['mean']:.2f} / {s['ade_m']['p90']:.2f} | "
             f"{s['goal_error_m']['mean']:.2f} / {s['goal_error_m']['p90']:.2f} | "
             f"{s['distance_m']['mean']:.1f} | {s['human_distance_m']['mean']:.1f} |")

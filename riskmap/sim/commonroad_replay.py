@@ -13,11 +13,23 @@ recorded traffic; the episode runs until the vehicle's recording ends (or `durat
 collision, or the ego leaving the lanes. Metrics are those of `riskmap drive` plus the error
 against the recorded human: ADE over the episode and goal error (distance to where the human
 was at the end).
+
+Traffic lights (recordings with signals, `rasterize.commonroad.LaneletLight`): the planner's
+scene carries them (`Scene.signals`) and its route waits at red lights. `red_light_violations`
+counts the times the ego's front crossed the stop line of a lane it was on while the light
+governing its turn was red (amber counts as red), once per crossing (`red_light_events`); a
+light on a lane the ego does not drive on never counts. The turn is the one the ego then made
+(the successor lanelet holding most of its later positions; the recorded vehicle's when the
+episode ends first; unknown at a lanelet without successors, where the crossing is red only if
+no light of the stop line is green). The recorded human's own count over the same time is
+`human_red_light_violations` (NGSIM drivers cross on amber, and turn right on red, which
+California allows after a stop: the reference, not zero).
 """
 
 from __future__ import annotations
 
 import dataclasses
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -26,9 +38,11 @@ import numpy as np
 from rasterize.commonroad import (
     CommonRoadSceneConfig,
     RecordedTraffic,
+    governing,
     lanes_from_lanelets,
     load_scenario,
-    route_on_lanelets,
+    movement_red,
+    turn_between,
 )
 from rasterize.errors import InputError
 from rasterize.frames import (
@@ -41,7 +55,13 @@ from rasterize.frames import (
 from rasterize.geometry import box_gap
 from rasterize.scene import STATE_DIM, Scene
 from riskmap.sim.control import planned_vehicle_class
-from riskmap.sim.metrics import SafetyConfig, centre_off_lane, dangerous_encounters, safety_pct
+from riskmap.sim.metrics import (
+    SafetyConfig,
+    centre_off_lane,
+    dangerous_encounters,
+    safety_pct,
+    stop_line_crossings,
+)
 from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, Plan
 from riskmap.sim.reactive_traffic import ReactiveTraffic
 from riskmap.sim.record import EpisodeRecord
@@ -143,14 +163,14 @@ def _ego_scene(traffic: RecordedTraffic, ego: int, track_t: list[float], track: 
                             np.cos(theta), np.sin(theta), np.interp(times, t_arr, s_arr[:, 4]),
                             np.interp(times, t_arr, s_arr[:, 5])])
     agents = np.array([ego] + order, dtype=np.int64)
-    route = route_on_lanelets(traffic.scenario.lanelet_network, ego_state, traffic.sizes[ego, 0],
-                              states[:, -1].reshape(-1, STATE_DIM), traffic.sizes[order, 0],
-                              config.route_rule, config.speed_limit_mps)
+    route = traffic.route(ego, ego_state, states[:, -1].reshape(-1, STATE_DIM),
+                          traffic.sizes[order, 0], now_s, config)
     return Scene(np.concatenate([mine[None], states.reshape(-1, len(times), STATE_DIM)]),
                  np.concatenate([mine_valid[None], valid.reshape(-1, len(times))]),
                  traffic.sizes[agents], traffic.kinds[agents], ego_index=0,
                  current_index=config.history_steps, dt=config.dt_s, lanes=lanes,
-                 source=f"commonroad:{traffic.name}", time_s=now_s, route_xy=route)
+                 source=f"commonroad:{traffic.name}", time_s=now_s, route_xy=route,
+                 signals=traffic.scene_signals(ego_state, now_s, config))
 
 
 class CommonRoadWorld:
@@ -306,6 +326,48 @@ class CommonRoadWorld:
         return min((gap for gap, _, _ in self._near(radius_m)), default=float("inf"))
 
 
+def _turn_taken(traffic: RecordedTraffic, agent: int, lanelet_id: int, times_s: np.ndarray,
+                states: np.ndarray, after_s: float) -> str | None:
+    """The turn vehicle `agent` made out of `lanelet_id` after `after_s`: into the successor
+    holding most of its positions after then, else the recorded vehicle's successor, else None
+    (no successor, or neither reached one)."""
+    network = traffic.scenario.lanelet_network
+    successors = [int(s) for s in network.find_lanelet_by_id(lanelet_id).successor]
+    if not successors:
+        return None
+    if len(successors) == 1:
+        return turn_between(network, lanelet_id, successors[0])
+    later = [p for p in np.asarray(states)[np.asarray(times_s) > after_s, :2]]
+    counts = Counter(int(i) for ids in (network.find_lanelet_by_position(later) if later else [])
+                     for i in ids if int(i) in successors)
+    if not counts:
+        recorded = traffic.lanelet_counts(agent)
+        if not any(recorded.get(s, 0) for s in successors):
+            return None
+        return turn_between(network, lanelet_id, traffic.successor_taken(agent, successors))
+    best = max(sorted(counts), key=lambda s: (counts[s], -s))
+    return turn_between(network, lanelet_id, best)
+
+
+def red_light_events(traffic: RecordedTraffic, agent: int, times_s: np.ndarray,
+                     states: np.ndarray) -> list[dict]:
+    """Every crossing of a signalised stop line by the front of vehicle `agent` (sizes from
+    `traffic`) driving `states` [T, 6] at `times_s` [T] (s from the recording's step 0), in time
+    order: lanelet id, time, the turn made, the governing lights' states and whether that was a
+    red-light violation (module doc)."""
+    events = []
+    length = float(traffic.sizes[agent, 0])
+    for lanelet_id, lights in sorted(traffic.lights_by_lanelet.items()):
+        for t in stop_line_crossings(times_s, states, length, lights[0].stop_line, lights[0].forward):
+            turn = _turn_taken(traffic, agent, lanelet_id, times_s, states, t)
+            governed = governing(lights, turn)
+            events.append({
+                "lanelet": int(lanelet_id), "time_s": round(float(t), 2), "turn": turn,
+                "lights": {str(light.light_id): str(light.state_at(np.array([t]))[0]) for light in governed},
+                "red": bool(governed) and movement_red(governed, t)})
+    return sorted(events, key=lambda e: e["time_s"])
+
+
 def _human_metrics(world: CommonRoadWorld) -> dict:
     """Error against the recorded human, its distance, and Safety % over the driven steps."""
     traffic, ego = world.traffic, world.ego_index
@@ -319,9 +381,11 @@ def _human_metrics(world: CommonRoadWorld) -> dict:
     dangerous, encounters = dangerous_encounters(driven, np.asarray(traffic.sizes[ego]), other_states,
                                                  other_present, np.asarray(traffic.sizes)[world.others],
                                                  SafetyConfig())
-    human_path, _ = traffic.resample(np.array([ego]),
-                                     np.asarray(world.track_t[world.history_len - 1:]))
+    human_t = np.asarray(world.track_t[world.history_len - 1:])
+    human_path, _ = traffic.resample(np.array([ego]), human_t)
+    human_events = red_light_events(traffic, ego, human_t, human_path[0]) if traffic.lights else []
     return {
+        "human_red_light_violations": sum(e["red"] for e in human_events),
         "human_distance_m": float(np.linalg.norm(np.diff(human_path[0, :, :2], axis=0), axis=1).sum()),
         "dangerous": dangerous, "encounters": encounters,
         "safety_pct": safety_pct(dangerous, encounters),
@@ -363,9 +427,15 @@ def replay_commonroad_episode(scenario_path, ego_id: int, planner, start_s: floa
     loop = drive_world(world, planner, LoopConfig(world.n_steps, config.control_hz // config.replan_hz,
                                                   config.history_s, config.gap_radius_m))
     human = _human_metrics(world)
+    # From the hand-over on: a crossing between the last human step and the first driven one is
+    # the ego's.
+    driven_t = np.asarray(world.track_t[world.history_len - 1:])
+    driven = np.asarray(world.track[world.history_len - 1:]).reshape(-1, STATE_DIM)
+    events = red_light_events(traffic, world.ego_index, driven_t, driven) if traffic.lights else []
     record = EpisodeRecord.measured(
         type(planner).__name__, world.crashed, world.off_network, round(world.time_s - world.start, 3),
         loop.distance_m, loop.speeds, loop.gaps, loop.plan_times_s,
         extra={"scenario": traffic.name, "ego_id": int(ego_id), "start_s": round(world.start, 3),
-               "collision": world.collision, **human})
+               "collision": world.collision, "signal_crossings": events, **human},
+        red_light_violations=sum(e["red"] for e in events))
     return record.as_dict()

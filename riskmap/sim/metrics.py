@@ -12,6 +12,13 @@ Trajectory metrics (benchmark, planner paper Table I); trajectories [T, 2] m eve
 - path_length_m: length of the driven polyline.
 - mean_jerk_mps3: mean |third finite difference of position| / dt^3 (0 with < 4 points).
 
+Traffic lights:
+- stop_line_crossings: times at which a vehicle's front (its centre plus half its length along
+  its heading) crosses a stop line forwards (from behind it to beyond it, in the lane's
+  direction, within the line's two ends, heading within 60 degrees of the lane's). A red-light
+  violation is such a crossing while the light governing the vehicle's turn is red (amber
+  counts as red), counted once per crossing (`riskmap.sim.commonroad_replay.red_light_events`).
+
 Box geometry:
 - box_gap (from rasterize.geometry): clearance between two boxes, 0 when they touch or overlap.
 - min_box_gap: smallest box_gap from one box to several (inf when there are none).
@@ -65,8 +72,8 @@ __all__ = [
     "SafetyConfig", "StriveConfig", "ade_m", "box_gap", "box_iou", "box_off_road", "box_polygon",
     "centre_off_lane", "classify_collision", "closing_dangerous_encounters", "coarse_collision_name",
     "coarse_collision_type", "dangerous_encounters", "drivable_area", "goal_error_m", "mean_jerk_mps3",
-    "min_box_gap", "off_road_fraction", "path_length_m", "safety_pct", "summarise_metric",
-    "vehicle_box",
+    "min_box_gap", "off_road_fraction", "path_length_m", "safety_pct", "stop_line_crossings",
+    "summarise_metric", "vehicle_box",
 ]
 
 
@@ -133,6 +140,43 @@ def mean_jerk_mps3(xy: np.ndarray, dt_s: float) -> float:
         return 0.0
     jerk = np.diff(xy, n=3, axis=0) / dt_s ** 3
     return float(np.linalg.norm(jerk, axis=1).mean())
+
+
+# ---- traffic lights -------------------------------------------------------------------------
+
+def stop_line_crossings(times_s: np.ndarray, states: np.ndarray, length_m: float,
+                        stop_line: np.ndarray, forward: np.ndarray,
+                        max_angle_deg: float = 60.0) -> list[float]:
+    """Times (s) at which the vehicle's front crosses `stop_line` forwards (module docstring).
+
+    times_s [T] increasing; states [T, >=4] world (x, y, heading_x, heading_y, ...); stop_line
+    [2, 2] its two ends; forward [2] the lane's driving direction at the line. The crossing time
+    is interpolated between the two steps around it. A front that starts beyond the line, or
+    goes back behind it and crosses again, counts per forward crossing.
+    """
+    times_s, states = np.asarray(times_s, float), np.asarray(states, float)
+    if len(times_s) < 2:
+        return []
+    line = np.asarray(stop_line, float)
+    forward = np.asarray(forward, float) / max(float(np.linalg.norm(forward)), 1e-12)
+    along_line = line[1] - line[0]
+    span = float(np.dot(along_line, along_line))
+    front = states[:, :2] + 0.5 * float(length_m) * states[:, 2:4]
+    # Signed distance from the line (positive beyond it, on the side `forward` points to).
+    normal = np.array([-along_line[1], along_line[0]]) / max(np.sqrt(span), 1e-12)
+    normal = normal if float(np.dot(normal, forward)) >= 0 else -normal
+    ahead = (front - line[0]) @ normal
+    out = []
+    for k in np.flatnonzero((ahead[:-1] < 0) & (ahead[1:] >= 0)):
+        alpha = float(-ahead[k] / (ahead[k + 1] - ahead[k]))
+        point = front[k] + alpha * (front[k + 1] - front[k])
+        u = float(np.dot(point - line[0], along_line) / max(span, 1e-12))
+        if not 0.0 <= u <= 1.0:
+            continue                                         # beside the line: another lane's
+        if float(np.dot(states[k + 1, 2:4], forward)) < np.cos(np.radians(max_angle_deg)):
+            continue                                         # across the lane, not along it
+        out.append(float(times_s[k] + alpha * (times_s[k + 1] - times_s[k])))
+    return out
 
 
 # ---- box geometry ---------------------------------------------------------------------------

@@ -37,6 +37,11 @@ class EpisodeRecord:
     plan_ms_median: float | None        # the plan_ms_* are None when the planner never planned
     plan_ms_mean: float | None
     plan_ms_p90: float | None
+    # Times the ego's front crossed the stop line of a lane it was on while the light governing
+    # its turn was red (amber counts as red); once per crossing. 0 where there are no signals.
+    red_light_violations: int = 0
+    # Times the ego waited (speed < 0.5 m/s for >= 1 s) while a crossing vehicle passed ahead of it.
+    yield_events: int = 0
     extra: dict = field(default_factory=dict)   # command-specific fields, written flat
 
     def as_dict(self) -> dict:
@@ -52,22 +57,35 @@ class EpisodeRecord:
     def from_dict(cls, record: dict) -> EpisodeRecord:
         """The record of a dict `as_dict` wrote, or an older one (`current_names`)."""
         record = current_names(record)
-        core = {name: record.get(name) for name in CORE_FIELDS}
+        core = {name: record.get(name, COUNT_DEFAULTS.get(name)) for name in CORE_FIELDS}
         return cls(**core, extra={k: v for k, v in record.items() if k not in core})
 
     @classmethod
     def measured(cls, planner: str, collided: bool, off_road: bool, simulated_s: float,
                  distance_m: float, speeds: list[float], gaps: list[float],
-                 plan_times_s: list[float], extra: dict | None = None) -> EpisodeRecord:
-        """The record from a loop's per-step speeds (m/s), gaps (m) and plan times (s)."""
+                 plan_times_s: list[float], extra: dict | None = None,
+                 red_light_violations: int = 0, yield_events: int = 0) -> EpisodeRecord:
+        """The record from a loop's per-step speeds (m/s), gaps (m) and plan times (s). A count
+        (`red_light_violations`, `yield_events`) may also come in `extra`; it moves to its field."""
+        extra = dict(extra or {})
+        counts = {"red_light_violations": red_light_violations, "yield_events": yield_events}
+        for name in COUNT_DEFAULTS:
+            if name in extra:
+                value = extra.pop(name)
+                if counts[name] not in (0, value):
+                    raise ValueError(f"{name} given twice: {counts[name]!r} and extra {value!r}")
+                counts[name] = value
         return cls(planner=planner, collided=bool(collided), off_road=bool(off_road),
                    simulated_s=simulated_s, distance_m=distance_m,
                    mean_speed_mps=float(np.mean(speeds)) if speeds else 0.0,
                    min_gap_m=finite_or_none(min(gaps)) if gaps else None,
-                   plan_calls=len(plan_times_s), **plan_ms_stats(plan_times_s), extra=dict(extra or {}))
+                   plan_calls=len(plan_times_s), **plan_ms_stats(plan_times_s),
+                   **{name: int(value) for name, value in counts.items()}, extra=extra)
 
 
 CORE_FIELDS = tuple(f.name for f in fields(EpisodeRecord) if f.name != "extra")
+# Counts that records written before they existed did not hold: read as their default (0).
+COUNT_DEFAULTS = {"red_light_violations": 0, "yield_events": 0}
 
 
 def finite_or_none(value: float | None) -> float | None:

@@ -181,6 +181,6 @@ def drive_episode(env, planner, config: DriveConfig, episode: int, hooks: DriveH
     record = EpisodeRecord.measured(
         getattr(planner, "name", "idm") if loop_record.drives_itself else type(planner).__name__, run.crashed, run.off_network,
         round(run.time_s, 3), loop_record.distance_m, loop_record.speeds, loop_record.gaps,
-        loop_record.plan_times_s, extra={"episode": episode, "env_seed": run.seed, "driver": run.driver,
-                                                    "yield_events": loop_record.yield_events})
+        loop_record.plan_times_s, extra={"episode": episode, "env_seed": run.seed, "driver": run.driver},
+        yield_events=loop_record.yield_events)
     return record.as_dict()

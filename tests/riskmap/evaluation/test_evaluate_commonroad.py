@@ -82,3 +82,23 @@ def test_cli_runs_recordings_in_reactive_mode(tmp_path, capsys):
     with pytest.raises(InputError, match="--mode 'x'"):
         evaluate_commonroad([FIXTURES], ("cv",), tmp_path / "x", progress=False, mode="x")
     assert not (tmp_path / "x").exists()
+
+
+def test_red_light_violations_are_summed_beside_collisions_with_the_human_reference():
+    from riskmap.evaluation.evaluate_commonroad import markdown_table, summarise
+
+    def record(violations, human, **kw):
+        base = {"collided": False, "off_road": False, "collision": None, "safety_pct": 0.0,
+                "ade_m": 1.0, "goal_error_m": 1.0, "distance_m": 10.0, "human_distance_m": 10.0,
+                "min_gap_m": 5.0, "red_light_violations": violations,
+                "human_red_light_violations": human}
+        return {**base, **kw}
+
+    summary = summarise([record(2, 1), record(0, 1), record(1, 0)])
+    assert (summary["red_light_violations"], summary["human_red_light_violations"],
+            summary["red_light_violation_episodes"]) == (3, 2, 2)
+    assert "| 3 (2) |" in markdown_table({"cv": summary})
+    old = record(0, 0)
+    del old["red_light_violations"], old["human_red_light_violations"]   # written before the count
+    summary = summarise([record(1, 1), old])
+    assert summary["red_light_violations"] is None and "| n/a (n/a) |" in markdown_table({"cv": summary})
