@@ -120,6 +120,9 @@ def load_scenario(path: str | Path):
         raise InputError("reading CommonRoad files needs the commonroad-io package; install it "
                          "as the README's 'Recorded traffic' section says") from None
     try:
+        # commonroad-io logs a warning per old-style lanelet successor tag ("successorRight ...
+        # is of deprecated format"): hundreds per Lankershim file, none of them actionable.
+        logging.getLogger(XMLFileReader.__module__).setLevel(logging.ERROR)
         scenario, _ = XMLFileReader(str(path)).open()
     except Exception as err:  # noqa: BLE001 - any parse failure is a bad file for the user
         raise InputError(f"CommonRoad file {path} could not be read ({type(err).__name__}: "
