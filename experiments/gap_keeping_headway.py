@@ -31,7 +31,7 @@ def _episode(task: tuple) -> dict:
     torch.set_num_threads(1)
     checkpoint, goal_variance, headway, path, vehicle = task
     config = gap_keeping.GapKeepingConfig(headway_s=headway)
-    riskmap_planner.keep_gap = lambda w, s, dt: gap_keeping.keep_gap(w, s, dt, config)
+    riskmap_planner.keep_gap = lambda w, s, dt, **kw: gap_keeping.keep_gap(w, s, dt, config, **kw)
     planner = RiskMapPlanner.load(checkpoint, goal_variance=goal_variance)
     record = replay_commonroad_episode(_traffic(Path(path)), vehicle, planner,
                                        config=ReplayConfig(goal="human"))

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rasterize.frames import ego_from_world, ego_pose
+from rasterize.predict import predict_along_lanes
 from rasterize.scene import Scene
 
 
@@ -54,10 +55,17 @@ def _project(points: np.ndarray, line: np.ndarray, arc: np.ndarray) -> tuple[np.
     return along, dist[rows, best]
 
 
+PREDICTIONS = ("straight", "lanes")
+
+
 def keep_gap(waypoints: np.ndarray, scene: Scene, dt_s: float,
-             config: GapKeepingConfig = GapKeepingConfig()) -> np.ndarray:
+             config: GapKeepingConfig = GapKeepingConfig(), prediction: str = "straight"
+             ) -> np.ndarray:
     """`waypoints` re-timed along their own path so the ego stays behind every vehicle predicted
-    on it (module doc); unchanged where nobody is in the way."""
+    on it (module doc); unchanged where nobody is in the way. `prediction`: the others at
+    constant velocity along their heading (`straight`, as checkpoints were tuned with) or at
+    constant speed along their lanes (`lanes`, `rasterize.predict`: a car turning across the
+    ego's path is seen where it will be, not where its heading points)."""
     line = np.concatenate([np.zeros((1, 2)), waypoints])
     steps = np.linalg.norm(np.diff(line, axis=0), axis=1)
     arc = np.concatenate([[0.0], np.cumsum(steps)])
@@ -72,6 +80,8 @@ def keep_gap(waypoints: np.ndarray, scene: Scene, dt_s: float,
     ego_len, ego_wid = scene.sizes[scene.ego_index]
     times = dt_s * np.arange(1, len(waypoints) + 1)
     cap = np.full(len(waypoints), np.inf)
+    if prediction == "lanes":
+        lane_xy, lane_heading = predict_along_lanes(scene, float(times[-1]), dt_s)   # [N, K, 2]
     for agent in range(scene.num_agents):
         if agent == scene.ego_index or not scene.valid[agent, now]:
             continue
@@ -79,8 +89,15 @@ def keep_gap(waypoints: np.ndarray, scene: Scene, dt_s: float,
         position = ego_from_world(state[:2][None], origin, heading)[0]
         if position[0] <= 0.0:        # only vehicles ahead now: one behind that overtakes is no leader
             continue
-        velocity = ego_from_world((state[:2] + state[4] * state[2:4])[None], origin, heading)[0] - position
-        predicted = position[None] + times[:, None] * velocity[None]
+        if prediction == "lanes":
+            predicted = ego_from_world(lane_xy[agent], origin, heading)                 # [K, 2]
+            ahead_xy = ego_from_world(lane_xy[agent] + state[4] * lane_heading[agent], origin, heading)
+            velocity = ahead_xy - predicted                                            # [K, 2]
+        else:
+            velocity = ego_from_world((state[:2] + state[4] * state[2:4])[None], origin,
+                                      heading)[0] - position
+            predicted = position[None] + times[:, None] * velocity[None]
+            velocity = np.broadcast_to(velocity, predicted.shape)
         along, off = _project(predicted, line_u, arc_u)
         length, width = scene.sizes[agent]
         on_path = (off <= 0.5 * (ego_wid + width) + config.lateral_margin_m) & (along > 0.0)
@@ -89,7 +106,7 @@ def keep_gap(waypoints: np.ndarray, scene: Scene, dt_s: float,
         direction = np.diff(line_u, axis=0)
         seg = np.clip(np.searchsorted(arc_u, along, side="right") - 1, 0, len(direction) - 1)
         unit = direction[seg] / np.maximum(np.linalg.norm(direction[seg], axis=1, keepdims=True), 1e-9)
-        speed_along = np.maximum((unit * velocity[None]).sum(axis=1), 0.0)
+        speed_along = np.maximum((unit * velocity).sum(axis=1), 0.0)
         limit = along - 0.5 * (ego_len + length) - config.standstill_m - config.headway_s * speed_along
         cap = np.where(on_path, np.minimum(cap, limit), cap)
     if not np.isfinite(cap).any():

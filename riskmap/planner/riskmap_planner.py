@@ -22,10 +22,11 @@ from riskmap.sim.plan import Plan
 
 def sampler_of(side: dict) -> SamplerConfig:
     """A checkpoint's sampler: as trained (sidecars from before `timing` and `keep_gap` existed:
-    uniform, no gap keeping), with a planning-time `timing` or `keep_gap` from the sidecar's
-    `planning` section over it."""
-    settings = {"timing": "uniform", "keep_gap": False, **side["sampler"]}
-    for key in ("timing", "keep_gap"):
+    uniform, no gap keeping; before `gap_prediction`: straight), with a planning-time `timing`,
+    `keep_gap` or `gap_prediction` from the sidecar's `planning` section over it."""
+    settings = {"timing": "uniform", "keep_gap": False, "gap_prediction": "straight",
+                **side["sampler"]}
+    for key in ("timing", "keep_gap", "gap_prediction"):
         if key in side.get("planning", {}):
             settings[key] = side["planning"][key]
     return SamplerConfig(**settings)
@@ -105,7 +106,8 @@ class RiskMapPlanner:
                                       speed_mps=float(scene.states[scene.ego_index, scene.current_index, 4]),
                                       goal_xy=route_goal_point(scene, self.grid))
         if self.sampler.keep_gap:
-            waypoints = keep_gap(waypoints, scene, self.sampler.dt_s)
+            waypoints = keep_gap(waypoints, scene, self.sampler.dt_s,
+                                 prediction=self.sampler.gap_prediction)
         t["sampler"] = time.perf_counter() - t0
         self._calls += 1
         t["total"] = sum(t.values())

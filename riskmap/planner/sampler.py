@@ -35,8 +35,12 @@ class SamplerConfig:
     max_accel_mps2: float = 3.0
     dt_s: float = 0.5                 # seconds between waypoints
     keep_gap: bool = True             # re-time behind vehicles on the path (`gap_keeping`)
+    gap_prediction: str = "lanes"     # how gap keeping predicts the others: straight | lanes
 
     def __post_init__(self) -> None:
+        if self.gap_prediction not in ("straight", "lanes"):
+            raise InputError(f"sampler gap_prediction {self.gap_prediction!r} is unknown; use "
+                             "straight or lanes")
         if self.timing not in TIMINGS:
             raise InputError(f"sampler timing {self.timing!r} is unknown; use one of {', '.join(TIMINGS)}")
 

@@ -57,3 +57,27 @@ def test_a_vehicle_cutting_in_later_caps_from_then_on():
 def test_the_default_gap_is_a_metre_behind_the_prediction():
     out = keep_gap(STRAIGHT, _scene(state(30.0, 0.0, 0.0, 0.0)), 0.5)
     np.testing.assert_allclose(out[:, 0], np.minimum(5.0 * np.arange(1, 13), 24.0), atol=1e-9)
+
+
+def test_lanes_prediction_sees_a_car_turning_across_the_path():
+    """A car 30 m ahead and 12 m to the left, heading west on a lane that turns south across the
+    ego's path at x = 12 m (in ~4 s at 6 m/s): along its lane it is in the way, along its heading
+    it never is."""
+    from rasterize.scene import Lane
+
+    straight = np.stack([np.linspace(30.0, 24.0, 7), np.full(7, 12.0)], axis=1)
+    angle = np.linspace(np.pi / 2, np.pi, 20)[1:]
+    arc = np.stack([24.0 + 12.0 * np.cos(angle), 12.0 * np.sin(angle)], axis=1)
+    south = np.stack([np.full(10, 12.0), np.linspace(-2.0, -20.0, 10)], axis=1)
+    centre = np.concatenate([straight, arc, south])
+    tangent = np.gradient(centre, axis=0)
+    tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
+    left = np.stack([-tangent[:, 1], tangent[:, 0]], axis=1)
+    lane = Lane(centre, centre + 2.0 * left, centre - 2.0 * left)
+    states = np.array([[state(0.0, 0.0, 0.0, 5.0)], [[30.0, 12.0, -1.0, 0.0, 6.0, 0.0]]])
+    scene = Scene(states, np.ones((2, 1), bool), np.array([[5.0, 2.0]] * 2), np.zeros(2, np.int8),
+                  0, 0, 0.1, lanes=(lane,))
+    plan = np.stack([2.5 * np.arange(1, 13), np.zeros(12)], axis=1)
+    assert np.array_equal(keep_gap(plan, scene, 0.5, prediction="straight"), plan)
+    held = keep_gap(plan, scene, 0.5, prediction="lanes")
+    assert held[:8, 0].max() < 12.0 - 5.0 + 1e-6    # short of the crossing until it has passed
