@@ -35,7 +35,7 @@ class SamplerConfig:
     max_accel_mps2: float = 3.0
     dt_s: float = 0.5                 # seconds between waypoints
     keep_gap: bool = True             # re-time behind vehicles on the path (`gap_keeping`)
-    gap_prediction: str = "lanes"     # how gap keeping predicts the others: straight | lanes
+    gap_prediction: str = "straight"  # how gap keeping predicts the others: straight | lanes
 
     def __post_init__(self) -> None:
         if self.gap_prediction not in ("straight", "lanes"):
