@@ -59,3 +59,21 @@ def test_tracking_a_lane_change_in_highway_env():
     assert end[0] == pytest.approx(120.0, abs=3.0)
     assert end[1] == pytest.approx(4.0, abs=0.5)
     assert abs(ego.heading) < 0.05
+
+
+def test_a_braking_plan_is_tracked_without_lag():
+    """A plan to stop from 7 m/s within 7.35 m (constant -3.33 m/s²): the command follows the
+    plan's deceleration at once, and driven by it the ego stops within a metre of the end."""
+    v0, a = 7.0, -7.0 ** 2 / (2 * 7.35)
+    t = 0.5 * np.arange(1, 13)
+    s = np.where(t < v0 / -a, v0 * t + 0.5 * a * t ** 2, 7.35)
+    ctrl = TrackingController()
+    ctrl.set_plan(np.stack([s, np.zeros(12)], axis=1), np.zeros(2), 0.0)
+    accel, _ = ctrl.action(np.zeros(2), 0.0, v0, 0.0, 0.1)
+    assert accel == pytest.approx(a, abs=0.5)
+    x, v = 0.0, v0
+    for k in range(80):
+        accel, _ = ctrl.action(np.array([x, 0.0]), 0.0, v, k * 0.1, 0.1)
+        v = max(v + accel * 0.1, 0.0)
+        x += v * 0.1
+    assert v == pytest.approx(0.0, abs=0.05) and x == pytest.approx(7.35, abs=1.0)
