@@ -26,6 +26,7 @@ from rasterize.scene_io import pack_scenes
 from riskmap.infra.atomic import write_json, write_npz
 from riskmap.infra.parallel import run_parallel
 from riskmap.infra.provenance import provenance
+from riskmap.infra.rundir import lock_out_dir
 from riskmap.sim.episode import FAMILY_SETUPS, Episode, FamilySetup, make_env
 from riskmap.sim.rollout import LoopConfig, drive_world
 from riskmap.sim.yielding import DEMONSTRATORS, demonstrator
@@ -206,6 +207,7 @@ def collect(config: CollectConfig, out: Path, workers: int = 1, resume: bool = F
         raise InputError(f"--workers must be a positive integer, got {workers!r}")
     _check_out_dir(out, config, resume)
     created = not out.exists()
+    lock_out_dir(out)   # one writer per dataset (creates it)
     start = time.perf_counter()
     done = {}
     for episode in range(config.episodes):

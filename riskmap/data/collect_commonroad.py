@@ -69,6 +69,7 @@ from riskmap.data.collect import (
     write_episode_shard,
     write_index_and_manifest,
 )
+from riskmap.infra.rundir import lock_out_dir
 
 SOURCE = "commonroad"
 # NGSIM in CommonRoad: <country>_<site>-<configuration>_<variant>_<T|S>-<version>
@@ -404,6 +405,7 @@ def collect_commonroad(inputs: list[str | Path], out: Path, resume: bool = False
         config, derivation = derive_settings(demos, traffics, config)
     _check_out_dir(out, config, resume)
     created = not out.exists()
+    lock_out_dir(out)   # one writer per dataset (creates it)
     start = time.perf_counter()
     (out / SHARD_DIR).mkdir(parents=True, exist_ok=True)
     write_index_and_manifest(out, config, [], 0.0)   # lets --resume recognise an interrupted run

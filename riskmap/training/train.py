@@ -26,7 +26,7 @@ from riskmap.data.groups import dataset_groups, match_groups, natural_key
 from riskmap.infra.atomic import atomic_write
 from riskmap.infra.checkpoint import read_sidecar, save_checkpoint
 from riskmap.infra.config_mapping import to_plain
-from riskmap.infra.rundir import refuse_unless_resume
+from riskmap.infra.rundir import lock_out_dir, refuse_unless_resume
 from riskmap.planner.irl import demo_negative_log_likelihood, irl_step
 from riskmap.planner.model import ModelConfig, RiskMapGenerator, load_backbone_weights
 from riskmap.planner.sampler import SamplerConfig, sample_trajectory
@@ -239,7 +239,7 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
         optimizer.load_state_dict(torch.load(out / "last_optimizer.pt", weights_only=True))
         start_epoch = previous["epoch"] + 1
         best = previous["best"]
-    out.mkdir(parents=True, exist_ok=True)
+    lock_out_dir(out)   # one writer per run directory (creates it)
     data = dataset_sidecar(dataset, train_idx, val_idx)
     writer = SummaryWriter(str(out / "tb"), purge_step=start_epoch)
     val_loader = DataLoader(Subset(dataset, val_idx), batch_size=config.batch_size)

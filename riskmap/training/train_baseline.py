@@ -24,7 +24,7 @@ from rasterize.raster import channels
 from riskmap.data.dataset import DemoDataset, PerturbedEgo
 from riskmap.infra.atomic import atomic_write
 from riskmap.infra.checkpoint import read_sidecar, save_checkpoint
-from riskmap.infra.rundir import refuse_unless_resume
+from riskmap.infra.rundir import lock_out_dir, refuse_unless_resume
 from riskmap.planner.bc import CHECKPOINT_KIND, BCConfig, BCNet, bc_inputs
 from riskmap.training.config import BaselineTrainConfig
 from riskmap.training.train import (
@@ -114,7 +114,7 @@ def train_baseline(config: BaselineTrainConfig, resume: bool = False, progress: 
         model.load_state_dict(load_file(str(out / "last.safetensors")))
         optimizer.load_state_dict(torch.load(out / "last_optimizer.pt", weights_only=True))
         start_epoch, best = previous["epoch"] + 1, previous["best"]
-    out.mkdir(parents=True, exist_ok=True)
+    lock_out_dir(out)   # one writer per run directory (creates it)
     data = dataset_sidecar(dataset, train_idx, val_idx)
     augment = (config.augment_probability, config.augment_heading_deg, config.augment_lateral_m)
     train_set = BCWindows(dataset, bc, augment, config.seed)

@@ -73,3 +73,40 @@ def test_a_second_writer_of_the_same_out_stops_at_once(tmp_path):
         claim_out_dir(out, holds="x", marker="run.json", resume=True, settings_file="run.json",
                       settings={"a": 1})
     assert (out / "run.json").exists()
+
+
+def test_collect_and_train_take_the_lock_too(tmp_path):
+    """A second `collect --resume` (or `train --resume`) on a folder another run is writing stops
+    at once with one line and writes nothing."""
+    import subprocess
+    import sys
+
+    from riskmap.data.collect import CollectConfig, collect
+    from riskmap.training.config import TrainConfig
+    from riskmap.training.train import train
+
+    data, run = tmp_path / "data", tmp_path / "run"
+    hold = "print('held', flush=True); time.sleep(30)"
+    holders = [
+        subprocess.Popen([sys.executable, "-c",                  # a collection still running
+                          "import time; from riskmap.data.collect import CollectConfig, collect; "
+                          f"collect(CollectConfig('intersection-v0', 2, seed=3), {str(data)!r}, "
+                          f"progress=False); {hold}"], stdout=subprocess.PIPE, text=True),
+        subprocess.Popen([sys.executable, "-c",                  # a training run starting
+                          "import time; from riskmap.infra.rundir import lock_out_dir; "
+                          f"lock_out_dir({str(run)!r}); {hold}"], stdout=subprocess.PIPE, text=True),
+    ]
+    try:
+        assert all(h.stdout.readline().strip() == "held" for h in holders)
+        before = sorted(p.name for p in data.rglob("*"))
+        with pytest.raises(InputError, match="being written by another run"):
+            collect(CollectConfig("intersection-v0", 2, seed=3), data, resume=True, progress=False)
+        assert sorted(p.name for p in data.rglob("*")) == before
+        with pytest.raises(InputError, match="being written by another run"):
+            train(TrainConfig(data=str(data), out=str(run), epochs=1, max_windows=2), resume=False,
+                  progress=False)
+        assert sorted(p.name for p in run.iterdir()) == [".lock"]
+    finally:
+        for h in holders:
+            h.kill()
+            h.wait()
