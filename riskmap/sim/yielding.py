@@ -163,7 +163,6 @@ def conflict_stop_distance(ego, others, params: GapAcceptance, critical_gap_s: f
 def yielding_vehicle_class():
     """The highway-env vehicle class of the yielding teacher (imported lazily: highway-env)."""
     from highway_env.vehicle.behavior import IDMVehicle
-    from highway_env.vehicle.kinematics import Vehicle
 
     class YieldingIDMVehicle(IDMVehicle):
         """IDM/MOBIL that gives way at conflict zones by gap acceptance (module docstring)."""
@@ -181,11 +180,13 @@ def yielding_vehicle_class():
                                           self.critical_gap_s, cache)
             self.stop_distance_m = stop
             if stop is not None:
-                obstacle = Vehicle(self.road, self.position, self.heading, 0.0)
-                # IDM towards a standing obstacle `stop` m ahead (its rear at the stop point).
+                # IDM towards a standing obstacle `stop` m ahead (its rear at the stop point):
+                # desired gap s0 + v T + v Δv / (2 √(a b)) with Δv = v.
                 accel = self.COMFORT_ACC_MAX * (1 - np.power(
                     max(self.speed, 0) / max(self.target_speed, 0.1), self.DELTA))
-                gap = self.desired_gap(self, obstacle, projected=False)
+                ab = -self.COMFORT_ACC_MAX * self.COMFORT_ACC_MIN
+                gap = (self.DISTANCE_WANTED + self.speed * self.TIME_WANTED
+                       + self.speed * self.speed / (2 * np.sqrt(ab)))
                 accel -= self.COMFORT_ACC_MAX * (gap / max(stop, 0.1)) ** 2
                 # `action` is the dict the vehicle steps with (IDMVehicle.act stored it).
                 self.action["acceleration"] = float(np.clip(min(self.action["acceleration"], accel),
