@@ -7,12 +7,20 @@ Shapes: reward, goal, value [B, H, W]; policy [B, 5, H, W] over ACTIONS; start_c
     Vⁿ(s) = logsumexp_a Qⁿ(s, a);  π(a | s) = exp(Q^N(s, a) − V^N(s))
 
 Moves off the grid do not exist. −∞ is represented by a large finite negative (`neg_value`) so
-that no arithmetic ever makes NaN; every Q is clamped into [neg, −neg] so that sums of huge
+that no arithmetic ever makes NaN; values are clamped into [neg, −neg] so that sums of huge
 rewards cannot overflow to ±inf either.
+
+Two kernels compute the same recursions. On the CPU (the planner's case) a numpy kernel uses that
+every Q of a cell shares its reward, V(s) = r(s) + logsumexp(γ V(neighbours), γ g(s)), over a
+value buffer padded with a border of −∞ (the moves off the grid), with every buffer allocated once:
+numpy's per-call overhead on 2 500-cell arrays is a fraction of torch's, and these loops are
+dozens of small operations per step. On other devices the torch kernel runs. Both are checked
+against the same float64 references (tests/riskmap/planner/test_vi.py).
 """
 
 from __future__ import annotations
 
+import numpy as np
 import torch
 
 ACTIONS = ("up", "down", "left", "right", "end")
@@ -38,13 +46,68 @@ def _check(reward: torch.Tensor, goal: torch.Tensor, horizon: int) -> None:
 
 def soft_value_iteration(reward: torch.Tensor, goal: torch.Tensor, horizon: int,
                          gamma: float = 1.0) -> tuple[torch.Tensor, torch.Tensor]:
-    """(value [B, H, W], policy [B, 5, H, W]) after `horizon` soft Bellman backups.
+    """(value [B, H, W], policy [B, 5, H, W]) after `horizon` soft Bellman backups."""
+    _check(reward, goal, horizon)
+    if use_numpy_kernel(reward):
+        value, policy = _value_iteration_numpy(reward.numpy(), goal.numpy(), horizon, gamma)
+        return torch.from_numpy(value), torch.from_numpy(policy)
+    return _value_iteration_torch(reward, goal, horizon, gamma)
 
-    One Q buffer [B, 5, H, W] is filled once with what never changes (the `end` column and the
+
+def use_numpy_kernel(tensor: torch.Tensor) -> bool:
+    """The numpy kernels serve CPU tensors that need no gradient (VI and SVF never do)."""
+    return tensor.device.type == "cpu" and not tensor.requires_grad and \
+        tensor.dtype in (torch.float32, torch.float64)
+
+
+def _value_iteration_numpy(reward: np.ndarray, goal: np.ndarray, horizon: int, gamma: float
+                           ) -> tuple[np.ndarray, np.ndarray]:
+    """The CPU kernel: per backup, the max of the five options, the sum of their shifted
+    exponentials, one log; about 23 passes over the grid (see the module docstring)."""
+    neg = neg_value(torch.float32 if reward.dtype == np.float32 else torch.float64)
+    dtype = reward.dtype
+    b, h, w = reward.shape
+    end = np.clip(gamma * goal.astype(dtype, copy=False), neg, -neg)      # γ g, the `end` option
+    padded = np.full((b, h + 2, w + 2), neg, dtype=dtype)                # V, border = off grid
+    value = padded[:, 1:-1, 1:-1]
+    # γ V of the cell each move leads to (the border stands for the moves that leave the grid).
+    scaled = padded if gamma == 1.0 else np.empty_like(padded)
+    options = (scaled[:, :-2, 1:-1], scaled[:, 2:, 1:-1], scaled[:, 1:-1, :-2], scaled[:, 1:-1, 2:])
+    top, total, term = (np.empty((b, h, w), dtype) for _ in range(3))
+    policy = np.empty((b, len(ACTIONS), h, w), dtype)
+    for step in range(horizon):
+        if gamma != 1.0:
+            np.multiply(padded, gamma, out=scaled)
+        np.maximum(options[0], options[1], out=top)
+        np.maximum(top, options[2], out=top)
+        np.maximum(top, options[3], out=top)
+        np.maximum(top, end, out=top)
+        np.subtract(end, top, out=total)
+        np.exp(total, out=total)
+        for option in options:
+            np.subtract(option, top, out=term)
+            np.exp(term, out=term)
+            total += term
+        np.log(total, out=total)
+        total += top                                   # logsumexp of the options
+        if step == horizon - 1:
+            # π(a | s) = exp(Q(s, a) − V(s)) = exp(option_a − logsumexp): the reward cancels.
+            # Taken before V is overwritten, while the options still hold the last backup's.
+            for a, option in enumerate(options):
+                np.subtract(option, total, out=policy[:, a])
+            np.subtract(end, total, out=policy[:, END])
+            np.exp(policy, out=policy)
+        np.add(total, reward, out=value)
+        np.clip(value, neg, -neg, out=value)
+    return np.ascontiguousarray(value), policy
+
+
+def _value_iteration_torch(reward: torch.Tensor, goal: torch.Tensor, horizon: int,
+                           gamma: float = 1.0) -> tuple[torch.Tensor, torch.Tensor]:
+    """The device kernel. One Q buffer [B, 5, H, W] is filled once with what never changes (the `end` column and the
     moves that leave the grid) and then only its in-grid move entries are rewritten each backup,
     in place, without per-step allocations.
     """
-    _check(reward, goal, horizon)
     neg = neg_value(reward.dtype)
     b, h, w = reward.shape
     q = (reward + gamma * neg).clamp(neg, -neg).unsqueeze(1).repeat(1, 5, 1, 1)
@@ -84,6 +147,9 @@ def state_visitation(policy: torch.Tensor, start_cells: torch.Tensor, horizon: i
     start_cells = torch.as_tensor(start_cells, device=policy.device).long().reshape(b, 2)
     if ((start_cells < 0) | (start_cells >= torch.tensor([h, w], device=policy.device))).any():
         raise ValueError(f"start cells {start_cells.tolist()} lie outside the {h}x{w} grid")
+    if use_numpy_kernel(policy):
+        path, goal = _state_visitation_numpy(policy.numpy(), start_cells.numpy(), horizon)
+        return torch.from_numpy(path), torch.from_numpy(goal)
     mass = policy.new_zeros((b, h, w))
     mass[torch.arange(b), start_cells[:, 0], start_cells[:, 1]] = 1.0
     svf_path = torch.zeros_like(mass)
@@ -96,6 +162,30 @@ def state_visitation(policy: torch.Tensor, start_cells: torch.Tensor, horizon: i
         svf_goal += mass * policy[:, END]
         torch.mul(moving, mass.unsqueeze(1), out=flow)
         nxt.zero_()
+        nxt[:, :-1, :] += flow[:, UP, 1:, :]
+        nxt[:, 1:, :] += flow[:, DOWN, :-1, :]
+        nxt[:, :, :-1] += flow[:, LEFT, :, 1:]
+        nxt[:, :, 1:] += flow[:, RIGHT, :, :-1]
+        mass, nxt = nxt, mass
+    return svf_path, svf_goal
+
+
+def _state_visitation_numpy(policy: np.ndarray, start_cells: np.ndarray, horizon: int
+                            ) -> tuple[np.ndarray, np.ndarray]:
+    """The CPU kernel of `state_visitation`: the same steps in numpy, buffers allocated once."""
+    b, _, h, w = policy.shape
+    mass = np.zeros((b, h, w), policy.dtype)
+    mass[np.arange(b), start_cells[:, 0], start_cells[:, 1]] = 1.0
+    svf_path, svf_goal = np.zeros_like(mass), np.zeros_like(mass)
+    flow = np.empty((b, END, h, w), policy.dtype)
+    moving, ending = policy[:, :END], policy[:, END]
+    nxt, ended = np.empty_like(mass), np.empty_like(mass)
+    for _ in range(horizon):
+        svf_path += mass
+        np.multiply(mass, ending, out=ended)
+        svf_goal += ended
+        np.multiply(moving, mass[:, None], out=flow)
+        nxt.fill(0.0)
         nxt[:, :-1, :] += flow[:, UP, 1:, :]
         nxt[:, 1:, :] += flow[:, DOWN, :-1, :]
         nxt[:, :, :-1] += flow[:, LEFT, :, 1:]

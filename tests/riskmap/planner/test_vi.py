@@ -7,7 +7,16 @@ import numpy as np
 import pytest
 import torch
 
+import riskmap.planner.vi as vi_module
 from riskmap.planner.vi import ACTIONS, END, MOVES, soft_value_iteration, state_visitation
+
+
+@pytest.fixture(autouse=True, params=["numpy", "torch"])
+def kernel(request, monkeypatch):
+    """Every test runs both kernels: numpy (CPU) and torch (other devices, run here on the CPU)."""
+    if request.param == "torch":
+        monkeypatch.setattr(vi_module, "use_numpy_kernel", lambda tensor: False)
+    return request.param
 
 
 def _next(cell, action, h, w):
@@ -170,3 +179,24 @@ def test_bad_inputs_are_named():
     _, policy = soft_value_iteration(torch.zeros(1, 3, 3), torch.zeros(1, 3, 3), 3)
     with pytest.raises(ValueError, match="outside"):
         state_visitation(policy, torch.tensor([[3, 0]]), 3)
+
+
+@pytest.mark.parametrize("gamma", [1.0, 0.95])
+def test_the_two_kernels_agree_on_planner_sized_float32_maps(gamma, monkeypatch):
+    """The planner's case: float32, 50x50, horizon 80; values and policies of the numpy kernel
+    against the torch kernel (float32 rounding differs by the order of the additions only)."""
+    gen = torch.Generator().manual_seed(3)
+    reward = -4.0 * torch.rand((2, 50, 50), generator=gen) - 0.2
+    goal = -0.1 * torch.rand((2, 50, 50), generator=gen)
+    starts = torch.tensor([[45, 25], [49, 0]])
+    with monkeypatch.context() as m:
+        m.setattr(vi_module, "use_numpy_kernel", lambda tensor: False)
+        v_torch, p_torch = soft_value_iteration(reward, goal, 80, gamma)
+        s_torch = state_visitation(p_torch, starts, 80)
+    m.undo()
+    v_np, p_np = vi_module._value_iteration_numpy(reward.numpy(), goal.numpy(), 80, gamma)
+    s_np = vi_module._state_visitation_numpy(p_np, starts.numpy(), 80)
+    np.testing.assert_allclose(v_np, v_torch.numpy(), rtol=1e-5, atol=1e-4)
+    np.testing.assert_allclose(p_np, p_torch.numpy(), atol=2e-5)
+    for a, b in zip(s_np, s_torch, strict=True):
+        np.testing.assert_allclose(a, b.numpy(), rtol=1e-5, atol=2e-5)
