@@ -42,7 +42,10 @@ class RiskMapPlanner:
     def __init__(self, model: torch.nn.Module, raster: RasterConfig, grid: GridConfig,
                  horizon: int, goal_variance: float, gamma: float = 1.0,
                  sampler: SamplerConfig = SamplerConfig(), seed: int = 0):
-        self.model, self.raster, self.grid = model.eval(), raster, grid
+        from riskmap.planner.model import for_inference
+
+        # The network as planning runs it (batch norms folded, channels-last): `for_inference`.
+        self.model, self.raster, self.grid = for_inference(model), raster, grid
         self.horizon, self.goal_variance, self.gamma = horizon, goal_variance, gamma
         self.sampler, self.seed = sampler, seed
         self.route_settings: dict | None = None   # route rule of recorded training data, if any
@@ -87,9 +90,10 @@ class RiskMapPlanner:
         goal_cell = route_goal_cell(scene, self.grid)
         start = start_cell(self.grid)
         t["raster"] = time.perf_counter() - t0
-        with torch.no_grad():
+        with torch.inference_mode():
             t0 = time.perf_counter()
-            risk = self.model(torch.from_numpy(raster).float().div_(255.0)[None],
+            image = torch.from_numpy(raster).float().div_(255.0)[None]
+            risk = self.model(image.contiguous(memory_format=torch.channels_last),
                               torch.from_numpy(motion)[None])
             t["network"] = time.perf_counter() - t0
             t0 = time.perf_counter()
