@@ -8,6 +8,7 @@ Shapes: policy [5, H, W] of one scene; paths [S, N + 1, 2] cells (row, col) with
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 import torch
@@ -88,35 +89,57 @@ def retime(path_cells: np.ndarray, moves: int, grid: GridConfig, speed_mps: floa
     return np.column_stack([np.interp(s, cum, centres[:, 0]), np.interp(s, cum, centres[:, 1])])
 
 
-def sample_paths(policy: torch.Tensor, start: tuple[int, int], horizon: int, samples: int,
-                 generator: torch.Generator) -> tuple[torch.Tensor, torch.Tensor]:
-    """All `samples` paths in one vectorised pass: (cells [S, horizon + 1, 2], moves [S]).
+def _walk(policy: torch.Tensor, start: tuple[int, int], horizon: int, samples: int,
+          generator: torch.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """The paths as flat cell indices row * W + col, (cells [S, N + 1], moves [S]), N the
+    longest path's moves.
 
-    Inverse-CDF sampling with all uniforms drawn at once from `generator`: one comparison per
-    step instead of a multinomial call (the policy rows sum to 1; the last bin takes any rounding
-    remainder). The walk itself runs in numpy, whose per-call overhead on 1000-element arrays is
-    a fraction of torch's.
+    Inverse-CDF sampling with all uniforms drawn at once from `generator`: an action is the
+    number of the policy's first four cumulative probabilities at or below the draw (4 = end; the
+    policy rows sum to 1, so the last bin takes any rounding remainder). A path that has ended
+    moves to an absorbing index H * W whose thresholds are all 0, so every later draw ends it
+    again: no per-path bookkeeping in the loop. The four comparisons of a path are four bytes,
+    counted at once by reading them as one 32-bit word times 0x01010101 (its top byte is their
+    sum): a step is a handful of numpy calls on 1000-element arrays.
     """
     _, h, w = policy.shape
-    moves = np.array([MOVES[a] for a in range(END)] + [(0, 0)], dtype=np.int64)   # end: stay
+    ended = h * w
     cdf = policy.detach().cpu().permute(1, 2, 0).reshape(h * w, 5).double().cumsum(dim=1).numpy()
-    cdf[:, -1] = 1.0
+    thresholds = np.concatenate([cdf[:, :END], np.zeros((1, END))])      # [H W + 1, 4]
+    step = np.array([MOVES[a][0] * w + MOVES[a][1] for a in range(END)] + [0], dtype=np.int64)
     uniforms = torch.rand((horizon, samples, 1), generator=generator, dtype=torch.float64).numpy()
-    path = np.empty((samples, horizon + 1, 2), dtype=np.int64)
-    path[:, 0] = start
-    cells = path[:, 0].copy()
-    alive = np.ones(samples, dtype=bool)
-    length = np.zeros(samples, dtype=np.int64)
+    flat = np.empty((horizon + 1, samples), dtype=np.int64)               # step-major while walking
+    flat[0] = start[0] * w + start[1]
+    last = horizon
     for t in range(horizon):
-        action = np.minimum((uniforms[t] >= cdf[cells[:, 0] * w + cells[:, 1]]).sum(axis=1), END)
-        alive &= action != END
-        cells += moves[np.where(alive, action, END)]
-        length += alive
-        path[:, t + 1] = cells
-        if not alive.any():
-            path[:, t + 2:] = cells[:, None]
+        below = uniforms[t] >= np.take(thresholds, flat[t], axis=0)      # [S, 4] bool
+        action = (below.view(np.uint32)[:, 0] * np.uint32(0x01010101)) >> np.uint32(24)
+        np.add(flat[t], step[action], out=flat[t + 1])
+        flat[t + 1][action == END] = ended
+        if (flat[t + 1] == ended).all():
+            last = t + 1
             break
-    return torch.from_numpy(path), torch.from_numpy(length)
+    flat = flat[: last + 1].T
+    moves = (flat != ended).sum(axis=1) - 1
+    end_cell = flat[np.arange(samples), moves]
+    return np.where(flat == ended, end_cell[:, None], flat), moves
+
+
+def sample_paths(policy: torch.Tensor, start: tuple[int, int], horizon: int, samples: int,
+                 generator: torch.Generator) -> tuple[torch.Tensor, torch.Tensor]:
+    """All `samples` paths in one vectorised pass: (cells [S, horizon + 1, 2], moves [S]); a
+    path stays in its last cell after it ends. Draws as `_walk`."""
+    _, _, w = policy.shape
+    flat, moves = _walk(policy, start, horizon, samples, generator)
+    flat = np.concatenate([flat, np.repeat(flat[:, -1:], horizon + 1 - flat.shape[1], axis=1)], axis=1)
+    return torch.from_numpy(np.stack([flat // w, flat % w], axis=-1)), torch.from_numpy(moves)
+
+
+@lru_cache(maxsize=16)
+def _cell_centres(grid: GridConfig) -> np.ndarray:
+    """Ego-frame centre of every cell, by flat index [H W, 2] (`ego_from_grid`, computed once)."""
+    rows, cols = np.divmod(np.arange(grid.rows * grid.cols), grid.cols)
+    return ego_from_grid(np.stack([rows, cols], axis=-1), grid)
 
 
 def downsample(paths: np.ndarray, moves: np.ndarray, count: int, grid: GridConfig) -> np.ndarray:
@@ -126,10 +149,23 @@ def downsample(paths: np.ndarray, moves: np.ndarray, count: int, grid: GridConfi
     Spacing is by metres along the cell centres, not by cell count: highway cells are 4.8 m long
     and 0.8 m wide, and counting cells would make a lane change look like braking.
     """
-    centres = ego_from_grid(paths, grid)                                    # [S, N + 1, 2]
-    step = np.linalg.norm(np.diff(centres, axis=1), axis=2)                 # [S, N]
+    paths = np.asarray(paths)
+    return _spaced(paths[..., 0] * grid.cols + paths[..., 1], np.asarray(moves), count, grid)
+
+
+def _spaced(flat: np.ndarray, moves: np.ndarray, count: int, grid: GridConfig) -> np.ndarray:
+    """`downsample` of paths given as flat cell indices [S, N + 1].
+
+    A move is one cell along a row (`row_m` metres) or a column (`col_m`), so its length is
+    looked up from the index difference (±W, ±1, or 0 where the path stands) instead of being
+    measured between centres; only the 2 × count centres that bracket a waypoint are looked up."""
+    w = grid.cols
+    length_of = np.zeros(2 * w + 1)                           # by index difference + W
+    length_of[[0, 2 * w]], length_of[[w - 1, w + 1]] = grid.row_m, grid.col_m
+    step = length_of[np.diff(flat, axis=1) + w]                            # [S, N]
     step[np.arange(step.shape[1])[None, :] >= moves[:, None]] = 0.0        # beyond the end
-    cum = np.concatenate([np.zeros((len(step), 1)), np.cumsum(step, axis=1)], axis=1)
+    cum = np.zeros((len(step), step.shape[1] + 1))
+    np.cumsum(step, axis=1, out=cum[:, 1:])
     targets = cum[:, -1:] * np.linspace(0.0, 1.0, count + 1)[None, 1:]     # [S, count]
     # Index of the first cumulative length >= target, and the fraction within that move: one
     # searchsorted over all rows at once, each row lifted above the previous one by an offset.
@@ -140,9 +176,66 @@ def downsample(paths: np.ndarray, moves: np.ndarray, count: int, grid: GridConfi
     lo = np.maximum(hi - 1, 0)
     c_lo, c_hi = np.take_along_axis(cum, lo, 1), np.take_along_axis(cum, hi, 1)
     frac = np.where(c_hi > c_lo, (targets - c_lo) / np.maximum(c_hi - c_lo, 1e-12), 0.0)
-    p_lo = np.take_along_axis(centres, lo[..., None], 1)
-    p_hi = np.take_along_axis(centres, hi[..., None], 1)
+    centres = _cell_centres(grid)
+    p_lo = centres[np.take_along_axis(flat, lo, 1)]
+    p_hi = centres[np.take_along_axis(flat, hi, 1)]
     return p_lo + frac[..., None] * (p_hi - p_lo)
+
+
+def distinct_at_least(rows: np.ndarray, k: int) -> int:
+    """min(k, number of distinct rows of `rows` [S, D]). Rows are first told apart by one random
+    projection (a few microseconds for 1000 rows): equal rows project equally, so if k
+    projections differ there are at least k distinct rows; only otherwise is the exact
+    row-wise unique taken."""
+    projected = rows @ np.random.default_rng(0).normal(size=rows.shape[1])
+    if len(np.unique(projected)) >= k:
+        return k
+    return min(k, len(np.unique(rows, axis=0)))
+
+
+def kmeans(points: np.ndarray, k: int, seed: int, max_iterations: int = 100,
+           tolerance: float = 1e-4) -> np.ndarray:
+    """Cluster labels [S] of `points` [S, D] (k ≤ number of distinct points): greedy k-means++
+    seeding from `seed` (each new centre the best of 2 + ln k candidates drawn in proportion to
+    the squared distance to the nearest centre so far, as scikit-learn seeds), then Lloyd's
+    iterations until no label changes or the centres move less than `tolerance` × the points'
+    mean variance (squared, summed over centres; scikit-learn's rule). An emptied cluster keeps
+    its centre. Squared distances by the expansion |x|² − 2 x·c + |c|², so an iteration is two
+    small matrix products."""
+    rng = np.random.default_rng(seed)
+    n = len(points)
+    trials = 2 + int(np.log(k))
+    centres = np.empty((k, points.shape[1]))
+    norms = (points ** 2).sum(axis=1)
+    twice = 2.0 * points
+    centres[0] = points[rng.integers(n)]
+    nearest = np.maximum(norms - twice @ centres[0] + centres[0] @ centres[0], 0.0)
+    for j in range(1, k):
+        cumulative = np.cumsum(nearest)
+        picks = np.minimum(np.searchsorted(cumulative, rng.random(trials) * cumulative[-1],
+                                           side="right"), n - 1)
+        candidates = points[picks]                                          # [trials, D]
+        to_candidates = norms[None, :] - candidates @ twice.T + (candidates ** 2).sum(axis=1)[:, None]
+        potentials = np.minimum(nearest[None, :], np.maximum(to_candidates, 0.0))   # [trials, S]
+        best = int(potentials.sum(axis=1).argmin())
+        centres[j], nearest = candidates[best], potentials[best]
+    threshold = tolerance * float(points.var(axis=0).mean())
+    one_hot = np.eye(k, dtype=points.dtype)
+    labels = np.full(n, -1)
+    twice_t = np.ascontiguousarray(twice.T)           # [D, S]: distances come out [k, S]
+    for _ in range(max_iterations):
+        new = ((centres ** 2).sum(axis=1)[:, None] - centres @ twice_t).argmin(axis=0)
+        if np.array_equal(new, labels):
+            break
+        labels = new
+        counts = np.bincount(labels, minlength=k)
+        filled = counts > 0
+        moved = (one_hot[:, labels] @ points)[filled] / counts[filled, None]
+        shift = float(((moved - centres[filled]) ** 2).sum())
+        centres[filled] = moved
+        if shift <= threshold:
+            break
+    return labels
 
 
 def sample_trajectory(policy: torch.Tensor, start: tuple[int, int], horizon: int, grid: GridConfig,
@@ -152,23 +245,18 @@ def sample_trajectory(policy: torch.Tensor, start: tuple[int, int], horizon: int
     cluster of `config.samples` sampled paths, timed by `config.timing` (`kinematic` needs the
     ego's `speed_mps`, and ends at the exact goal `goal_xy` when given and the path reaches its
     cell; without a speed the waypoints are uniform). Deterministic given `seed`."""
-    from sklearn.cluster import KMeans
-
     generator = torch.Generator().manual_seed(seed)
-    paths, lengths = sample_paths(policy.detach().cpu(), start, horizon, config.samples, generator)
-    # Columns after the longest path only repeat its end: drop them before measuring lengths.
-    paths, lengths = paths[:, :int(lengths.max()) + 1].numpy(), lengths.numpy()
+    flat, moves = _walk(policy.detach().cpu(), start, horizon, config.samples, generator)
     # Represent each path by its own evenly spaced waypoints, then cluster those.
-    feats = downsample(paths, lengths, config.waypoints, grid)
-    flat = feats.reshape(len(feats), -1)
-    distinct = len(np.unique(flat, axis=0))
-    k = max(1, min(config.clusters, distinct))
-    labels = KMeans(n_clusters=k, n_init=1, random_state=seed).fit_predict(flat) if k > 1 \
-        else np.zeros(len(flat), dtype=int)
+    feats = _spaced(flat, moves, config.waypoints, grid)
+    flat_feats = feats.reshape(len(feats), -1)
+    k = distinct_at_least(flat_feats, config.clusters)
+    labels = kmeans(flat_feats, k, seed) if k > 1 else np.zeros(len(flat_feats), dtype=int)
     largest = np.bincount(labels).argmax()
     members = np.flatnonzero(labels == largest)
-    centre = flat[members].mean(axis=0)
-    best = members[np.argmin(((flat[members] - centre) ** 2).sum(axis=1))]
+    centre = flat_feats[members].mean(axis=0)
+    best = members[np.argmin(((flat_feats[members] - centre) ** 2).sum(axis=1))]
     if config.timing == "kinematic" and speed_mps is not None:
-        return retime(paths[best], int(lengths[best]), grid, speed_mps, config, goal_xy)
-    return flat[best].reshape(config.waypoints, 2)
+        path = np.stack(np.divmod(flat[best], grid.cols), axis=-1)
+        return retime(path, int(moves[best]), grid, speed_mps, config, goal_xy)
+    return flat_feats[best].reshape(config.waypoints, 2)

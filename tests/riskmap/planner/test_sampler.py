@@ -109,3 +109,71 @@ def test_a_path_into_the_goal_cell_ends_at_the_goal_itself():
     np.testing.assert_allclose(end[-1], goal, atol=1e-9)
     elsewhere = retime(path, 2, grid, 0.0, SamplerConfig(), goal_xy=np.array([20.0, 0.0]))
     np.testing.assert_allclose(elsewhere[-1], [7.8, -0.3], atol=1e-9)   # not the goal's cell
+
+
+def _loop_walk(policy: np.ndarray, start, horizon: int, uniforms: np.ndarray):
+    """Plain reference of the inverse-CDF walk: per path and step, the first action whose
+    cumulative probability exceeds the draw; `end` (or the horizon) stops the path."""
+    from riskmap.planner.vi import END, MOVES
+
+    paths, lengths = [], []
+    for s in range(uniforms.shape[1]):
+        cell, path = tuple(start), [tuple(start)]
+        for t in range(horizon):
+            cumulative = np.cumsum(policy[:, cell[0], cell[1]])
+            action = next((a for a in range(END) if uniforms[t, s] < cumulative[a]), END)
+            if action == END:
+                break
+            cell = (cell[0] + MOVES[action][0], cell[1] + MOVES[action][1])
+            path.append(cell)
+        lengths.append(len(path) - 1)
+        paths.append(path + [cell] * (horizon + 1 - len(path)))
+    return np.array(paths), np.array(lengths)
+
+
+def test_the_vectorised_walk_equals_a_plain_loop_with_the_same_draws():
+    rng = np.random.default_rng(4)
+    reward = torch.tensor(-rng.uniform(0.2, 2.0, (1, 12, 12)))
+    goal = torch.tensor(rng.normal(0.0, 3.0, (1, 12, 12)))
+    policy = soft_value_iteration(reward, goal, horizon=15)[1][0]
+    paths, lengths = sample_paths(policy, (10, 6), 15, 300, torch.Generator().manual_seed(9))
+    uniforms = torch.rand((15, 300, 1), generator=torch.Generator().manual_seed(9),
+                          dtype=torch.float64).numpy()[..., 0]
+    ref_paths, ref_lengths = _loop_walk(policy.numpy(), (10, 6), 15, uniforms)
+    np.testing.assert_array_equal(lengths.numpy(), ref_lengths)
+    np.testing.assert_array_equal(paths.numpy(), ref_paths)
+    assert 0 < ref_lengths.min() < ref_lengths.max()          # paths of several lengths
+
+
+def test_kmeans_finds_separated_clusters_and_is_deterministic():
+    from riskmap.planner.sampler import kmeans
+
+    rng = np.random.default_rng(0)
+    centres = rng.uniform(-50, 50, (5, 24))
+    truth = rng.integers(0, 5, 600)
+    points = centres[truth] + rng.normal(0, 0.5, (600, 24))
+    labels = kmeans(points, 5, seed=1)
+    np.testing.assert_array_equal(labels, kmeans(points, 5, seed=1))
+    # The same partition up to renaming: every true cluster maps to exactly one label.
+    pairs = set(zip(truth.tolist(), labels.tolist()))
+    assert len(pairs) == 5 and len({t for t, _ in pairs}) == 5 and len({lab for _, lab in pairs}) == 5
+
+
+def test_kmeans_with_as_many_clusters_as_distinct_points_separates_them_all():
+    from riskmap.planner.sampler import kmeans
+
+    points = np.repeat(np.array([[0.0, 0.0], [10.0, 0.0], [0.0, 10.0]]), [50, 30, 20], axis=0)
+    labels = kmeans(points, 3, seed=0)
+    assert sorted(np.bincount(labels).tolist()) == [20, 30, 50]
+
+
+def test_distinct_at_least_counts_exactly_below_k():
+    from riskmap.planner.sampler import distinct_at_least
+
+    rows = np.repeat(np.arange(12.0).reshape(4, 3), 25, axis=0)           # 4 distinct rows
+    assert distinct_at_least(rows, 10) == 4
+    assert distinct_at_least(rows, 3) == 3
+    many = np.random.default_rng(0).normal(size=(100, 6))
+    assert distinct_at_least(many, 10) == 10
+    # Rows that one projection could confuse are still told apart exactly.
+    assert distinct_at_least(np.array([[1.0, 0.0], [0.0, 1.0]] * 5), 10) == 2
