@@ -11,10 +11,9 @@ that no arithmetic ever makes NaN; values are clamped into [neg, −neg] so that
 rewards cannot overflow to ±inf either.
 
 Two kernels compute the same recursions. On the CPU (the planner's case) a numpy kernel uses that
-every Q of a cell shares its reward, V(s) = r(s) + logsumexp(γ V(neighbours), γ g(s)), over a
-value buffer padded with a border of −∞ (the moves off the grid), with every buffer allocated once:
-numpy's per-call overhead on 2 500-cell arrays is a fraction of torch's, and these loops are
-dozens of small operations per step. On other devices the torch kernel runs. Both are checked
+every Q of a cell shares its reward, V(s) = r(s) + logsumexp(γ V(neighbours), γ g(s)), with
+every buffer allocated once: numpy's per-call overhead on 2 500-cell arrays is a fraction of
+torch's, and these loops are a dozen small operations per step. On other devices the torch kernel runs. Both are checked
 against the same float64 references (tests/riskmap/planner/test_vi.py).
 """
 
@@ -62,44 +61,42 @@ def use_numpy_kernel(tensor: torch.Tensor) -> bool:
 
 def _value_iteration_numpy(reward: np.ndarray, goal: np.ndarray, horizon: int, gamma: float
                            ) -> tuple[np.ndarray, np.ndarray]:
-    """The CPU kernel: per backup, the max of the five options, the sum of their shifted
-    exponentials, one log; about 23 passes over the grid (see the module docstring)."""
+    """The CPU kernel. The five options of every cell, γ V(neighbour) per move and γ g for `end`,
+    live in one buffer [B, 5, H, W] whose move slots are refreshed from V each backup (a move off
+    the grid keeps −∞); a backup is then max, subtract, exp, sum, log over that buffer: twelve
+    numpy calls. Values are clamped only when an input is beyond ±1e20: below that, V stays
+    within 2 · 1e20 + horizon · (1e20 + ln 5) of zero, far inside [neg, −neg]."""
     neg = neg_value(torch.float32 if reward.dtype == np.float32 else torch.float64)
     dtype = reward.dtype
     b, h, w = reward.shape
-    end = np.clip(gamma * goal.astype(dtype, copy=False), neg, -neg)      # γ g, the `end` option
-    padded = np.full((b, h + 2, w + 2), neg, dtype=dtype)                # V, border = off grid
-    value = padded[:, 1:-1, 1:-1]
-    # γ V of the cell each move leads to (the border stands for the moves that leave the grid).
-    scaled = padded if gamma == 1.0 else np.empty_like(padded)
-    options = (scaled[:, :-2, 1:-1], scaled[:, 2:, 1:-1], scaled[:, 1:-1, :-2], scaled[:, 1:-1, 2:])
-    top, total, term = (np.empty((b, h, w), dtype) for _ in range(3))
-    policy = np.empty((b, len(ACTIONS), h, w), dtype)
-    for step in range(horizon):
-        if gamma != 1.0:
-            np.multiply(padded, gamma, out=scaled)
-        np.maximum(options[0], options[1], out=top)
-        np.maximum(top, options[2], out=top)
-        np.maximum(top, options[3], out=top)
-        np.maximum(top, end, out=top)
-        np.subtract(end, top, out=total)
-        np.exp(total, out=total)
-        for option in options:
-            np.subtract(option, top, out=term)
-            np.exp(term, out=term)
-            total += term
+    clamp = not (np.abs(reward).max() <= 1e20 and np.abs(goal).max() <= 1e20)
+    options = np.full((b, len(ACTIONS), h, w), neg, dtype=dtype)
+    options[:, END] = np.clip(gamma * goal.astype(dtype, copy=False), neg, -neg)
+    value = np.full((b, h, w), neg, dtype=dtype)
+    # (slot of a move's option, the values of the cells it leads to) for moves inside the grid
+    slots = ((options[:, UP, 1:, :], value[:, :-1, :]), (options[:, DOWN, :-1, :], value[:, 1:, :]),
+             (options[:, LEFT, :, 1:], value[:, :, :-1]), (options[:, RIGHT, :, :-1], value[:, :, 1:]))
+    top, total = np.empty_like(value), np.empty_like(value)
+    work = np.empty_like(options)
+    for _ in range(horizon):
+        for slot, target in slots:
+            if gamma == 1.0:
+                np.copyto(slot, target)
+            else:
+                np.multiply(target, gamma, out=slot)
+        np.max(options, axis=1, out=top)
+        np.subtract(options, top[:, None], out=work)
+        np.exp(work, out=work)
+        np.sum(work, axis=1, out=total)
         np.log(total, out=total)
         total += top                                   # logsumexp of the options
-        if step == horizon - 1:
-            # π(a | s) = exp(Q(s, a) − V(s)) = exp(option_a − logsumexp): the reward cancels.
-            # Taken before V is overwritten, while the options still hold the last backup's.
-            for a, option in enumerate(options):
-                np.subtract(option, total, out=policy[:, a])
-            np.subtract(end, total, out=policy[:, END])
-            np.exp(policy, out=policy)
         np.add(total, reward, out=value)
-        np.clip(value, neg, -neg, out=value)
-    return np.ascontiguousarray(value), policy
+        if clamp:
+            np.clip(value, neg, -neg, out=value)
+    # π(a | s) = exp(Q(s, a) − V(s)) = exp(option_a − logsumexp): the shared reward cancels. The
+    # slots still hold the last backup's options.
+    np.subtract(options, total[:, None], out=work)
+    return value, np.exp(work, out=work)
 
 
 def _value_iteration_torch(reward: torch.Tensor, goal: torch.Tensor, horizon: int,
@@ -172,18 +169,18 @@ def state_visitation(policy: torch.Tensor, start_cells: torch.Tensor, horizon: i
 
 def _state_visitation_numpy(policy: np.ndarray, start_cells: np.ndarray, horizon: int
                             ) -> tuple[np.ndarray, np.ndarray]:
-    """The CPU kernel of `state_visitation`: the same steps in numpy, buffers allocated once."""
+    """The CPU kernel of `state_visitation`: the same steps in numpy, buffers allocated once. The
+    `end` share of a cell is the same at every step, so the goal layer is that share times the
+    cell's visits, taken once at the end."""
     b, _, h, w = policy.shape
     mass = np.zeros((b, h, w), policy.dtype)
     mass[np.arange(b), start_cells[:, 0], start_cells[:, 1]] = 1.0
-    svf_path, svf_goal = np.zeros_like(mass), np.zeros_like(mass)
+    svf_path = np.zeros_like(mass)
     flow = np.empty((b, END, h, w), policy.dtype)
-    moving, ending = policy[:, :END], policy[:, END]
-    nxt, ended = np.empty_like(mass), np.empty_like(mass)
+    moving = policy[:, :END]
+    nxt = np.empty_like(mass)
     for _ in range(horizon):
         svf_path += mass
-        np.multiply(mass, ending, out=ended)
-        svf_goal += ended
         np.multiply(moving, mass[:, None], out=flow)
         nxt.fill(0.0)
         nxt[:, :-1, :] += flow[:, UP, 1:, :]
@@ -191,4 +188,4 @@ def _state_visitation_numpy(policy: np.ndarray, start_cells: np.ndarray, horizon
         nxt[:, :, :-1] += flow[:, LEFT, :, 1:]
         nxt[:, :, 1:] += flow[:, RIGHT, :, :-1]
         mass, nxt = nxt, mass
-    return svf_path, svf_goal
+    return svf_path, svf_path * policy[:, END]
