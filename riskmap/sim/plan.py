@@ -7,6 +7,8 @@ rollout (`riskmap.sim.rollout`) replans at 2 Hz and tracks the waypoints with a 
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol, runtime_checkable
 
@@ -25,15 +27,39 @@ class Plan:
 
     The intermediate products are there for figures; planners without them leave them None.
     risk_map, goal_map, svf [G, G]; policy [5, G, G]; timings_s: seconds per stage.
+
+    `svf` may be given as a function of no arguments: it is then computed when first read, its
+    seconds added to timings_s["svf"] (not to "total", the time to the waypoints). Only figures
+    and open-loop metrics read it, so a closed-loop replan does not pay for it.
     """
 
     waypoints: np.ndarray
     risk_map: np.ndarray | None = None
     goal_map: np.ndarray | None = None
     policy: np.ndarray | None = None
-    svf: np.ndarray | None = None
+    svf: np.ndarray | Callable[[], np.ndarray] | None = None
     goal_cell: tuple[int, int] | None = None
     timings_s: dict = field(default_factory=dict)
+
+    def __getstate__(self) -> dict:
+        """A pickled plan (sent to another process) carries its computed SVF, not a function."""
+        return {**self.__dict__, "_svf": self.svf}
+
+
+def _read_svf(plan: Plan) -> np.ndarray | None:
+    value = plan.__dict__.get("_svf")
+    if callable(value):
+        start = time.perf_counter()
+        value = plan.__dict__["_svf"] = value()
+        plan.timings_s["svf"] = time.perf_counter() - start
+    return value
+
+
+def _write_svf(plan: Plan, value) -> None:
+    plan.__dict__["_svf"] = value
+
+
+Plan.svf = property(_read_svf, _write_svf, doc="expected visits [G, G] (computed when first read)")
 
 
 @runtime_checkable
