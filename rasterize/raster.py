@@ -292,18 +292,25 @@ def rasterize_scene(scene: Scene, config: RasterConfig) -> np.ndarray:
 
     now, ego = scene.current_index, scene.ego_index
     oldest = max(0, now - round(config.history_s / scene.dt))
-    boxes = _boxes_px(scene, origin, heading, config)
+    # Every box of the window shrunk and turned into OpenCV vertices at once; only the fills
+    # run per box. Boxes wholly off the raster are skipped (OpenCV would clip them to nothing).
+    boxes = _shrink_boxes(_boxes_px(scene, origin, heading, config)[:, oldest:now + 1])
+    lo, hi = boxes.min(axis=2), boxes.max(axis=2)                 # [N, T, 2] (col, row)
+    on_raster = scene.valid[:, oldest:now + 1] & (hi[..., 0] > -1) & (lo[..., 0] < config.cols + 1) \
+        & (hi[..., 1] > -1) & (lo[..., 1] < config.rows + 1)     # False for NaN states too
+    vertices = _cv_points(np.where(on_raster[..., None, None], boxes, 0.0))   # [N, T, 4, 2]
     for step in range(oldest, now + 1):  # oldest first: newer, brighter boxes overwrite
         age = (now - step) * scene.dt
         value = history_intensity(age, config.history_s, scene.dt)
-        for agent in np.flatnonzero(scene.valid[:, step]):
+        for agent in np.flatnonzero(on_raster[:, step - oldest]):
             is_ego = agent == ego
             if step == now:
                 channel = "ego" if is_ego else "agents"
                 value = 255
             else:
                 channel = "ego_history" if is_ego else "agents_history"
-            _fill(layers[CHANNEL_INDEX[channel]], _shrink_box(boxes[agent, step]), value)
+            cv2.fillPoly(layers[CHANNEL_INDEX[channel]], [vertices[agent, step - oldest]],
+                         int(value), lineType=cv2.LINE_8, shift=_SHIFT)
     if config.predict_s > 0:
         index = channel_index(config)
         _draw_agents_future(layers[index["agents_future"]], scene, origin, heading, config)

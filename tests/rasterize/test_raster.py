@@ -231,3 +231,21 @@ def test_signal_red_is_the_share_of_the_horizon_the_light_is_red(times, red, val
 def test_signals_draw_nothing_without_predict_s():
     raster = rasterize_scene(_signal_scene([0.0], [True]), UNIT_RASTER)
     np.testing.assert_array_equal(raster, rasterize_scene(constant_velocity_scene(), UNIT_RASTER))
+
+
+def test_invalid_steps_draw_nothing_whatever_their_states_hold():
+    """States of invalid steps (NaN in recordings) are never drawn and raise no cast warning."""
+    import warnings
+
+    from rasterize.raster import rasterize_scene
+    from tests.scenes import UNIT_RASTER, constant_velocity_scene, straight_lane
+
+    with_nan = constant_velocity_scene(lanes=[straight_lane(0.0)])
+    with_junk = constant_velocity_scene(lanes=[straight_lane(0.0)])
+    for scene, fill in ((with_nan, np.nan), (with_junk, 3.0)):
+        scene.states[1, :2] = fill
+        scene.valid[1, :2] = False
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        a = rasterize_scene(with_nan, UNIT_RASTER)
+    np.testing.assert_array_equal(a, rasterize_scene(with_junk, UNIT_RASTER))
