@@ -4,8 +4,12 @@
 (SVF) is computed only when a plan's `svf` is read (figures, open-loop metrics; never in closed
 loop), so it is timed apart, here by reading it after each plan.
 
-Scenes are highway-v0 moments with 2 s of recorded history; the risk-map generator is freshly
-initialised (weights do not change the cost). Medians over `--calls` plans per resolution, after
+Scenes are highway-v0 moments with 2 s of recorded history. The risk-map generator carries the
+shipped highway planner's weights (`--weights`) at every resolution: its layers do not depend on
+the grid (the features are resized to G × G before the 1 × 1 head), and trained weights give the
+policies a planner meets, whose paths end near the goal; a freshly initialised network
+(`--weights random`) gives near-uniform risk, paths that wander to the horizon and a sampler
+that costs more. Medians over `--calls` plans per resolution, after
 `--warmup` calls; torch uses `--threads` threads. The value iteration is also timed against the
 plain-Python loop reference of the tests on one small grid, in the same process, as a sanity
 ratio of the vectorised implementation.
@@ -27,6 +31,7 @@ import numpy as np
 import torch
 
 from rasterize.config import raster_config_for_env
+from riskmap.infra.checkpoint import load_weights
 from riskmap.planner.model import ModelConfig, RiskMapGenerator
 from riskmap.planner.riskmap_planner import RiskMapPlanner
 from riskmap.planner.vi import soft_value_iteration
@@ -101,6 +106,8 @@ def main() -> None:
     parser.add_argument("--warmup", type=int, default=3)
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--resolutions", default="25,50,75,100")
+    parser.add_argument("--weights", default="checkpoints/riskmap_highway",
+                        help="a risk-map checkpoint whose weights every resolution uses, or random")
     parser.add_argument("--out", type=Path, default=Path("experiments/results/bench_planner.json"))
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
@@ -110,6 +117,8 @@ def main() -> None:
     rows = []
     for g in (int(x) for x in args.resolutions.split(",")):
         model = RiskMapGenerator(ModelConfig(resolution=g)).eval()
+        if args.weights != "random":
+            model = load_weights(model, Path(args.weights), "pass --weights random")
         planner = RiskMapPlanner(model, raster, raster.grid(g), horizon=int(round(1.6 * g)),
                                  goal_variance=5.0)
         for i in range(args.warmup):
@@ -146,7 +155,7 @@ def main() -> None:
           f"formulation, {floor['floor_fused_ms']} ms for any fused kernel"
           + (f"; measured {vi_100} ms ({vi_100 / floor['floor_ms']:.1f}x the floor)" if vi_100 else ""))
     machine = {"cpus": os.cpu_count(), "machine": platform.machine(),
-               "torch": torch.__version__, "threads": args.threads}
+               "torch": torch.__version__, "threads": args.threads, "weights": args.weights}
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps({"machine": machine, "rows": rows,
                                     "vi_reference_ratio": round(ratio, 1), "vi_floor": floor},
