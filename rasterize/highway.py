@@ -41,6 +41,37 @@ def _sample_lane(lane, s_values: np.ndarray) -> Lane:
                 float(s_values[0]))
 
 
+def _sample_straight_lane(lane, s_values: np.ndarray) -> Lane:
+    """`_sample_lane` of a highway-env `StraightLane`, all points at once: `StraightLane.position`
+    is start + s * direction + lateral * lateral_direction, here with the same elementwise
+    operations on arrays, so the points are the same."""
+    s = np.asarray(s_values, dtype=np.float64)[:, None]
+    half = 0.5 * lane.width_at(s_values[0])       # a straight lane's width is the same everywhere
+    along = lane.start + s * lane.direction
+    centre, left, right = (world_from_highway_env(along + lateral * lane.direction_lateral)
+                           for lateral in (0.0, -half, half))
+    line_left, line_right = (LineType(int(t)) for t in lane.line_types)
+    return Lane(centre, left, right, line_left, line_right, float(lane.width_at(s_values[0])),
+                float(s_values[0]))
+
+
+def _sample_circular_lane(lane, s_values: np.ndarray) -> Lane:
+    """`_sample_lane` of a highway-env `CircularLane`: `CircularLane.position` is centre +
+    (radius - lateral * direction) * [cos phi, sin phi] with phi from s alone, so the cosine and
+    sine of each s (taken point by point, as there) serve its three points; the rest is the same
+    elementwise arithmetic on arrays, so the points are the same."""
+    s = np.asarray(s_values, dtype=np.float64)
+    phis = lane.direction * s / lane.radius + lane.start_phase
+    unit = np.array([np.array([np.cos(phi), np.sin(phi)]) for phi in phis]).reshape(-1, 2)
+    half = 0.5 * lane.width_at(s_values[0])       # a circular lane's width is the same everywhere
+    centre, left, right = (world_from_highway_env(lane.center + (lane.radius - lateral * lane.direction)
+                                                  * unit)
+                           for lateral in (0.0, -half, half))
+    line_left, line_right = (LineType(int(t)) for t in lane.line_types)
+    return Lane(centre, left, right, line_left, line_right, float(lane.width_at(s_values[0])),
+                float(s_values[0]))
+
+
 def _simplify(lane: Lane, tolerance_m: float) -> Lane:
     """Drop samples that the centre line does not need (straight stretches keep 2 points)."""
     if lane.centre.shape[0] <= 2:
@@ -69,6 +100,11 @@ def lanes_near(network, centre_world: np.ndarray, sampling: LaneSampling = LaneS
     """
     centre_hw = world_from_highway_env(centre_world)
     radius = sampling.radius_m
+    batch = {}
+    if getattr(network, "fast_road", False):     # riskmap.sim.fast_road: the same points, at once
+        from highway_env.road.lane import CircularLane, StraightLane
+
+        batch = {StraightLane: _sample_straight_lane, CircularLane: _sample_circular_lane}
     lanes = []
     for _from, tos in network.graph.items():
         for _to, lane_list in tos.items():
@@ -82,7 +118,8 @@ def lanes_near(network, centre_world: np.ndarray, sampling: LaneSampling = LaneS
                     if hi - lo < 1e-6:
                         continue
                 n = max(2, int(np.ceil((hi - lo) / sampling.step_m)) + 1)
-                sampled = _sample_lane(lane, np.linspace(lo, hi, n))
+                s_values = np.linspace(lo, hi, n)
+                sampled = batch.get(type(lane), _sample_lane)(lane, s_values)
                 if np.linalg.norm(sampled.centre - centre_world, axis=1).min() > radius:
                     continue
                 lanes.append(_simplify(sampled, sampling.simplify_m))
@@ -146,11 +183,18 @@ def route_ahead(road, vehicle, rule: RouteRule = RouteRule()) -> np.ndarray:
     s0 = float(lane.local_coordinates(vehicle.position)[0])
     route = _route_lanes(network, vehicle, s0 + reach)
     along = np.arange(0.0, reach + rule.sample_m, rule.sample_m)
-    dense = np.asarray([network.position_heading_along_route(route, s0 + d, 0.0,
-                                                             vehicle.lane_index)[0] for d in along])
+    # A fast road (riskmap.sim.fast_road) gives the same points and the same leaders with less
+    # work: its network places the route's straight stretches at once, and only the vehicles that
+    # come within lane_half_width_m of the route (with a margin) are examined.
+    fast = bool(getattr(road, "fast_road", False)) and hasattr(network, "positions_along_route")
+    if fast:
+        dense = network.positions_along_route(route, s0 + along, vehicle.lane_index, 0.0)
+    else:
+        dense = np.asarray([network.position_heading_along_route(route, s0 + d, 0.0,
+                                                                 vehicle.lane_index)[0] for d in along])
     dense[0] = vehicle.position
     distance = free
-    for other in road.vehicles:
+    for other in _maybe_leaders(road, vehicle, dense, rule.lane_half_width_m) if fast else road.vehicles:
         if other is vehicle or np.linalg.norm(other.position - vehicle.position) > reach + 10.0:
             continue
         offsets = np.linalg.norm(dense - other.position, axis=1)
@@ -166,6 +210,76 @@ def route_ahead(road, vehicle, rule: RouteRule = RouteRule()) -> np.ndarray:
     ds = np.linspace(0.0, distance, rule.points)
     pts = np.stack([np.interp(ds, along, dense[:, 0]), np.interp(ds, along, dense[:, 1])], axis=1)
     return world_from_highway_env(pts)
+
+
+def _maybe_leaders(road, vehicle, dense: np.ndarray, half_width_m: float) -> list:
+    """The vehicles of `road` (in its order) that come within `half_width_m` of a point of
+    `dense`, up to a rounding margin: the others cannot be leaders in `route_ahead`."""
+    others = [v for v in road.vehicles if v is not vehicle]
+    if not others:
+        return []
+    try:
+        positions = np.array([v.position for v in others], dtype=np.float64)
+    except (TypeError, ValueError):
+        return list(road.vehicles)
+    if positions.shape != (len(others), 2):
+        return list(road.vehicles)
+    diff = dense[None, :, :] - positions[:, None, :]
+    nearest = np.sqrt((diff * diff).sum(axis=-1)).min(axis=1)
+    near = ~(nearest > half_width_m + 1e-6 + 1e-12 * np.abs(positions).sum(axis=1))
+    return [v for v, keep in zip(others, near.tolist()) if keep]
+
+
+class _Frozen:
+    """A vehicle as `route_ahead` reads it, at the step it was copied."""
+
+    __slots__ = ("LENGTH", "_velocity", "heading", "lane_index", "position", "route", "speed")
+
+    @property
+    def velocity(self) -> np.ndarray:
+        # highway-env's Vehicle.velocity (speed * direction) of the copied speed and heading.
+        if self._velocity is None:
+            self._velocity = self.speed * np.array([np.cos(self.heading), np.sin(self.heading)])
+        return self._velocity
+
+
+class _RouteLater:
+    """`route_ahead(road, ego, rule)` of the moment this was made, computed on `compute()` from
+    copies of everything it reads: the ego's lane, route, position, speed and length, each other
+    vehicle's position, velocity and length, in the road's order (the network does not change).
+    A velocity that highway-env's own properties give is computed from the copied speed and
+    heading when needed."""
+
+    __slots__ = ("ego", "road", "route", "rule")
+
+    def __init__(self, road, ego, rule: RouteRule):
+        from types import SimpleNamespace
+
+        from highway_env.vehicle.kinematics import Vehicle
+        from highway_env.vehicle.objects import RoadObject
+
+        def freeze(v) -> _Frozen:
+            f = _Frozen()
+            f.position, f.LENGTH, f.speed, f.heading, f._velocity = (np.array(v.position),
+                                                                    v.LENGTH, v.speed, None, None)
+            if v is ego:                       # route_ahead reads its lane and route, not its velocity
+                f.lane_index, f.route = v.lane_index, list(v.route) if v.route else v.route
+            elif type(v).velocity is Vehicle.velocity and type(v).direction is RoadObject.direction:
+                f.heading = v.heading
+            else:
+                f._velocity = v.velocity
+            return f
+
+        vehicles = [freeze(v) for v in road.vehicles]
+        self.ego = next((f for v, f in zip(road.vehicles, vehicles) if v is ego), None) or freeze(ego)
+        self.road = SimpleNamespace(network=road.network, vehicles=vehicles,
+                                    fast_road=getattr(road, "fast_road", False))
+        self.rule, self.route = rule, None
+
+    def compute(self) -> np.ndarray:
+        if self.route is None:
+            self.route = route_ahead(self.road, self.ego, self.rule)
+        return self.route
 
 
 def _wrap(angle: np.ndarray) -> np.ndarray:
@@ -190,7 +304,7 @@ class TrafficRecorder:
             raise InputError(f"TrafficRecorder dt_s must be positive seconds, got {dt_s}")
         self.road, self.ego, self.dt_s = road, ego, float(dt_s)
         self.route_rule = route_rule
-        self._routes: dict[int, np.ndarray] = {}   # step -> the ego's route ahead
+        self._routes: dict[int, np.ndarray | _RouteLater] = {}   # step -> the ego's route ahead
         self._ids: dict[int, int] = {}          # id(vehicle object) -> agent id
         self._alive: list[object] = []          # keeps objects alive so ids are never reused
         self._rows: list[tuple[int, int, np.ndarray]] = []  # (step, agent, state[6])
@@ -228,10 +342,19 @@ class TrafficRecorder:
     def record(self) -> None:
         """Append the current state of every vehicle and object on the road."""
         step = self.num_steps
+        fast = getattr(self.road, "fast_road", False)
         for obj in list(self.road.vehicles) + list(self.road.objects):
             agent = self._agent_id(obj)
-            pos = world_from_highway_env(obj.position)
-            heading = float(heading_from_highway_env(obj.heading))
+            position = obj.position
+            if fast and type(position) is np.ndarray and position.dtype == np.float64 \
+                    and position.shape == (2,):
+                # The same numbers as below: the flip of y is a product by -1.0, of the
+                # heading a negation.
+                pos = (position[0], position[1] * -1.0)
+                heading = -float(obj.heading)
+            else:
+                pos = world_from_highway_env(position)
+                heading = float(heading_from_highway_env(obj.heading))
             prev = self._last_heading.get(agent)
             yaw_rate = (float(_wrap(heading - prev[1])) / self.dt_s
                         if prev is not None and prev[0] == step - 1 else 0.0)
@@ -242,7 +365,11 @@ class TrafficRecorder:
             self._latest[agent] = state
         self.ego_id  # the ego is always known, even before it moves
         if self.route_rule is not None and getattr(self.ego, "lane_index", None) is not None:
-            self._routes[step] = route_ahead(self.road, self.ego, self.route_rule)
+            if getattr(self.road, "fast_road", False):
+                # riskmap.sim.fast_road: keep what route_ahead reads, compute it if a scene asks.
+                self._routes[step] = _RouteLater(self.road, self.ego, self.route_rule)
+            else:
+                self._routes[step] = route_ahead(self.road, self.ego, self.route_rule)
         self.num_steps += 1
         self._cache = None
 
@@ -297,7 +424,14 @@ class TrafficRecorder:
         lane_set = lanes_near(self.road.network, ego_xy, sampling) if lanes else ()
         return Scene(sel_states, sel_valid, sizes[agents], kinds[agents], ego_index=0,
                      current_index=n_hist, dt=dt_s, lanes=lane_set, source=source,
-                     time_s=step * self.dt_s, route_xy=self._routes.get(step))
+                     time_s=step * self.dt_s, route_xy=self.route_at(step))
+
+    def route_at(self, step: int) -> np.ndarray | None:
+        """The ego's route ahead (`route_ahead`) recorded at `step`, None if none was."""
+        route = self._routes.get(step)
+        if isinstance(route, _RouteLater):
+            route = self._routes[step] = route.compute()
+        return route
 
 
 def scene_from_highway_env(env, history_s: float = 2.0, future_s: float = 0.0, *,

@@ -12,6 +12,7 @@ import numpy as np
 
 from rasterize.config import family_of_env
 from rasterize.scene import Scene
+from riskmap.sim import fast_road
 from riskmap.sim.control import hand_over_to_planner
 from riskmap.sim.metrics import centre_off_lane, min_box_gap, vehicle_box
 
@@ -54,7 +55,10 @@ def episode_seed(seed: int, episode: int) -> int:
     return int(np.random.SeedSequence([seed, episode]).generate_state(1)[0])
 
 
-def make_env(env_id: str, record_hz: int = 10):
+def make_env(env_id: str, record_hz: int = 10, fast: bool | None = None):
+    """The gymnasium env of `env_id`, simulated at `record_hz`, with its roads upgraded to
+    `riskmap.sim.fast_road`'s (same physics, less time) unless `fast` is False; `fast=None`
+    follows the environment variable RISKMAP_FAST_ROAD (on unless set to 0)."""
     import warnings
 
     import gymnasium as gym
@@ -68,18 +72,22 @@ def make_env(env_id: str, record_hz: int = 10):
     env_config = {"simulation_frequency": record_hz, "policy_frequency": 1,
                   "duration": setup.episode_s}
     env_config.update(setup.env_config)
-    return gym.make(env_id, config=env_config)
+    env = gym.make(env_id, config=env_config)
+    if fast_road.fast_by_default() if fast is None else fast:
+        fast_road.install(env.unwrapped)
+    return env
 
 
 _ENVS: dict = {}
 
 
-def cached_env(env_id: str, record_hz: int = 10):
-    """`make_env(env_id, record_hz)`, made once per process: every episode resets it from its own
-    seed, so reuse does not change results."""
-    if (env_id, record_hz) not in _ENVS:
-        _ENVS[env_id, record_hz] = make_env(env_id, record_hz)
-    return _ENVS[env_id, record_hz]
+def cached_env(env_id: str, record_hz: int = 10, fast: bool | None = None):
+    """`make_env(env_id, record_hz, fast)`, made once per process: every episode resets it from
+    its own seed, so reuse does not change results."""
+    key = (env_id, record_hz, fast_road.fast_by_default() if fast is None else bool(fast))
+    if key not in _ENVS:
+        _ENVS[key] = make_env(env_id, record_hz, key[2])
+    return _ENVS[key]
 
 
 def _install_human_ego(base, rng: np.random.Generator, setup: FamilySetup) -> dict:
@@ -108,6 +116,8 @@ def _install_human_ego(base, rng: np.random.Generator, setup: FamilySetup) -> di
 
 def min_gap_on_road(road, ego, radius_m: float) -> float:
     """Smallest box gap from `ego` to the other vehicles on `road` within `radius_m`."""
+    if fast_road.is_fast(road):
+        return fast_road.min_gap_on_road(road, ego, radius_m)
     return min_box_gap(vehicle_box(ego), (vehicle_box(v) for v in road.vehicles
                                           if v is not ego and np.linalg.norm(v.position - ego.position) < radius_m))
 
