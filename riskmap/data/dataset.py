@@ -18,6 +18,7 @@ A sample (grid G = resolution, C = raster channels):
 from __future__ import annotations
 
 import json
+import warnings
 import zipfile
 from dataclasses import replace
 from pathlib import Path
@@ -113,6 +114,8 @@ class DemoDataset(_TorchDataset):
         except (OSError, ValueError):
             raise InputError(f"{self.root / INDEX} is missing or unreadable; run "
                              "`riskmap collect ... --resume` to rebuild it") from None
+        self.cache = None                           # see use_cache
+        self.shard_paths: list[Path] = []           # per shard with windows: its file
         self._shards: list[dict[str, np.ndarray]] = []
         self._groups: list[str | None] = []        # per shard: its group, None without one
         self._items: list[tuple[int, int]] = []
@@ -127,6 +130,7 @@ class DemoDataset(_TorchDataset):
                                  f"{entry['windows']}; run `riskmap collect ... --resume`")
             self._items.extend((len(self._shards), i) for i in range(count))
             self._shards.append(arrays)
+            self.shard_paths.append(path)
             self._groups.append(entry.get("group"))
         if not self._items:
             raise InputError(f"dataset {self.root} holds no windows; collect more episodes")
@@ -154,12 +158,29 @@ class DemoDataset(_TorchDataset):
         return unpack_scene(self._shards[shard], local, source=self.source)
 
     def __getitem__(self, index: int) -> dict:
-        return self.sample(self.scene(index))
+        if self.cache is None:
+            return self.sample(self.scene(index))
+        arrays = self.cache.get(index)
+        if arrays is None:
+            arrays = self.sample_arrays(self.scene(index))
+            try:
+                self.cache.put(index, arrays)
+            except OSError as err:              # the disk full: go on without the cache
+                warnings.warn(f"sample cache given up: {err}", stacklevel=2)
+                self.cache = None
+        return as_tensors(arrays)
+
+    def use_cache(self, cache) -> None:
+        """Serve unperturbed windows from `cache` (`riskmap.data.sample_cache.SampleCache`, made
+        for this dataset and its settings), building and storing those it lacks; None: none."""
+        self.cache = cache
 
     def sample(self, scene: Scene) -> dict:
         """The training sample (see the module docstring) of a scene with a recorded future."""
-        import torch
+        return as_tensors(self.sample_arrays(scene))
 
+    def sample_arrays(self, scene: Scene) -> dict[str, np.ndarray]:
+        """`sample`'s arrays before `as_tensors`: numpy, the raster still uint8 [C, 200, 200]."""
         origin, heading = ego_pose(scene)
         cells = demo_path_cells(scene, self.grid)
         counts, goal = visitation_from_path(cells, self.grid)
@@ -171,7 +192,7 @@ class DemoDataset(_TorchDataset):
         else:
             goal_cell = tuple(int(v) for v in np.argwhere(goal)[0])
         sample = {
-            "raster": rasterize_scene(scene, self.raster_config).astype(np.float32) / 255.0,
+            "raster": rasterize_scene(scene, self.raster_config),
             "motion": motion_features(scene, self.grid),
             "demo": np.stack([counts, goal]),
             "uncertainty": uncertainty_map(scene, self.grid, self.sigma_x, self.sigma_y),
@@ -181,7 +202,7 @@ class DemoDataset(_TorchDataset):
             "demo_path": path,
             "future": ego_from_world(scene.ego_future_xy(), origin, heading).astype(np.float32),
         }
-        return {k: torch.from_numpy(np.ascontiguousarray(v)) for k, v in sample.items()}
+        return sample
 
 
 class PerturbedEgo(_TorchDataset):
@@ -203,17 +224,35 @@ class PerturbedEgo(_TorchDataset):
     def __len__(self) -> int:
         return len(self.base)
 
+    def perturbation(self, index: int) -> tuple[float, float] | None:
+        """This epoch's draw for window `index`: (heading turn rad, lateral shift m), or None
+        when the window is served as recorded."""
+        rng = np.random.default_rng([self.seed, self.epoch, index])
+        if rng.random() < self.probability:
+            heading = rng.uniform(-self.max_heading, self.max_heading)
+            return heading, rng.uniform(-self.max_lateral, self.max_lateral)
+        return None
+
     def scene(self, index: int) -> Scene:
         """Window `index`'s scene, perturbed or not as this epoch's draw says."""
         scene = self.base.scene(index)
-        rng = np.random.default_rng([self.seed, self.epoch, index])
-        if rng.random() < self.probability:
-            scene = scene.with_ego_perturbed(rng.uniform(-self.max_heading, self.max_heading),
-                                             rng.uniform(-self.max_lateral, self.max_lateral))
-        return scene
+        draw = self.perturbation(index)
+        return scene if draw is None else scene.with_ego_perturbed(*draw)
 
     def __getitem__(self, index: int) -> dict:
-        return self.base.sample(self.scene(index))
+        draw = self.perturbation(index)
+        if draw is None:
+            return self.base[index]          # as recorded: the base's (cached) sample
+        return self.base.sample(self.base.scene(index).with_ego_perturbed(*draw))
+
+
+def as_tensors(arrays: dict[str, np.ndarray]) -> dict:
+    """A sample's tensors (the module docstring) from `DemoDataset.sample_arrays`: the raster
+    scaled from uint8 to float32 [0, 1], every other array as it is."""
+    import torch
+
+    return {k: torch.from_numpy(v.astype(np.float32) / 255.0 if k == "raster" else np.ascontiguousarray(v))
+            for k, v in arrays.items()}
 
 
 def with_human_goal(scene):

@@ -47,12 +47,19 @@ class TrainConfig:
     # Seconds of predicted future drawn in the raster (RasterConfig.predict_s); None: as the
     # dataset was collected.
     predict_s: float | None = None
+    # How samples are made; neither changes what is computed (a resume may change them):
+    workers: int | None = None          # sample processes; None: 0 on the CPU, else up to 4
+    cache: str = "auto"                 # sample cache folder; auto: DATA/cache, else OUT/cache; off
 
     def __post_init__(self) -> None:
         if self.val_groups is not None:
             object.__setattr__(self, "val_groups", tuple(self.val_groups))
         if self.predict_s is not None:
             check_predict_s(self.predict_s, "--predict-s")
+        if self.workers is not None and self.workers < 0:
+            raise InputError(f"--workers must be 0 or more, got {self.workers}")
+        if not self.cache:
+            raise InputError("--cache must be auto, off or a folder")
         if self.goal_variance is not None and not self.goal_variance > 0:
             raise InputError(f"--goal-variance must be positive (cells²), got {self.goal_variance}")
         for name in ("epochs", "batch_size", "resolution"):

@@ -4,12 +4,20 @@ Every epoch: a pass over the training episodes in a seeded order, then validatio
 episodes (demonstration NLL under the policy; ADE/FDE of the sampled plan against the recorded
 future on a fixed subset). Writes RUN/log.csv, TensorBoard scalars in RUN/tb/, RUN/last.* (for
 --resume: weights, optimizer and progress) and RUN/best.* (lowest validation ADE).
+
+Windows served as recorded (validation, and training windows whose ego this epoch leaves
+unperturbed) come from the sample cache (`riskmap.data.sample_cache`) once built; `workers`
+DataLoader processes, where asked for, build samples while the network trains, in the same order
+and with the same content as the training process would. On the CPU the network runs in the
+channels-last memory layout (the same computation up to rounding, faster convolutions).
 """
 
 from __future__ import annotations
 
 import csv
 import math
+import os
+import sys
 import time
 from dataclasses import MISSING, asdict, fields, replace
 from pathlib import Path
@@ -23,6 +31,7 @@ from rasterize.errors import InputError
 from rasterize.raster import channels
 from riskmap.data.dataset import DemoDataset, PerturbedEgo, collected_raster_config
 from riskmap.data.groups import dataset_groups, match_groups, natural_key
+from riskmap.data.sample_cache import open_sample_cache
 from riskmap.infra.atomic import atomic_write
 from riskmap.infra.checkpoint import read_sidecar, save_checkpoint
 from riskmap.infra.config_mapping import to_plain
@@ -100,16 +109,64 @@ def resolve_goal_variance(requested: float | None, dataset: DemoDataset) -> floa
     return round(0.5 * ((rms["along"] / grid.row_m) ** 2 + (rms["across"] / grid.col_m) ** 2), 3)
 
 
-def _to(batch: dict, device: torch.device) -> dict:
-    return {k: v.to(device) for k, v in batch.items()}
+def _to(batch: dict, device: torch.device, channels_last: bool = False) -> dict:
+    batch = {k: v.to(device) for k, v in batch.items()}
+    if channels_last:
+        batch["raster"] = batch["raster"].contiguous(memory_format=torch.channels_last)
+    return batch
 
 
-def _evaluate(model, loader, config: TrainConfig, irl, grid, device) -> dict:
+def use_channels_last(device: torch.device) -> bool:
+    """Whether the network runs channels-last: on the CPU, where oneDNN's convolutions, batch norm
+    and pooling are faster in that layout (forward and backward of a batch of 32 200x200 rasters
+    on 2 cores: 0.85 s instead of 1.07 s; experiments/bench_train.py); elsewhere the layout is
+    left as it is."""
+    return device.type == "cpu"
+
+
+def sample_workers(requested: int | None, device: torch.device) -> int:
+    """How many processes build samples: `requested`, else none when the network trains on the
+    CPU (its threads use every core, and a worker taking one stalls them all at their next
+    barrier: slower on 2 cores, experiments/bench_train.py), else up to 4, a core left free."""
+    if requested is not None:
+        return requested
+    return 0 if device.type == "cpu" else max(0, min(4, (os.cpu_count() or 1) - 1))
+
+
+def _loader(dataset, batch_size: int, workers: int) -> DataLoader:
+    """Batches in `dataset`'s order, built by `workers` processes (0: this one)."""
+    return DataLoader(dataset, batch_size=batch_size, num_workers=workers,
+                      prefetch_factor=2 if workers else None)
+
+
+def attach_sample_cache(dataset: DemoDataset, config: TrainConfig, out: Path,
+                        progress: bool = True) -> None:
+    """Serve `dataset`'s unperturbed windows from its sample cache under `config.cache` (auto:
+    DATA/cache, else OUT/cache where the dataset's folder cannot be written; off: none)."""
+    if config.cache == "off":
+        return
+    roots = [Path(config.data) / "cache", out / "cache"] if config.cache == "auto" \
+        else [Path(config.cache)]
+    for root in roots:
+        try:
+            dataset.use_cache(open_sample_cache(dataset, root))
+            return
+        except OSError as err:
+            error = f"{root}: {err.strerror or err}"
+    if config.cache != "auto":
+        raise InputError(f"--cache {config.cache}: cannot make the sample cache there ({error}); "
+                         "pass a writable folder or --cache off")
+    if progress:
+        print(f"no sample cache ({error}); samples are built every epoch", file=sys.stderr)
+
+
+def _evaluate(model, loader, config: TrainConfig, irl, grid, device,
+              channels_last: bool = False) -> dict:
     model.eval()
     nll, ade, fde, seen = [], [], [], 0
     with torch.no_grad():
         for batch in loader:
-            batch = _to(batch, device)
+            batch = _to(batch, device, channels_last)
             risk = model(batch["raster"], batch["motion"])
             step = irl_step(risk, batch, irl)
             nll.append(demo_negative_log_likelihood(step.policy, batch["demo_path"]).cpu())
@@ -172,12 +229,18 @@ def with_raster_channels(state: dict, in_channels: int) -> dict:
     return {**state, "backbone.0.weight": grown}
 
 
+# Settings a resume may change: how long to train, and how samples are made (not what they are).
+RESUMABLE_CHANGES = ("epochs", "workers", "cache")
+
+
 def same_settings(saved: dict, config) -> bool:
-    """Whether a run's saved `train` settings are `config`'s but for --epochs (the one setting a
-    resume may change). A setting newer than the saved run (absent from its sidecar) counts as
-    at its default, so that runs begun before it existed still resume."""
+    """Whether a run's saved `train` settings are `config`'s but for `RESUMABLE_CHANGES`. A
+    setting newer than the saved run (absent from its sidecar) counts as at its default, so that
+    runs begun before it existed still resume."""
     defaults = {f.name: f.default for f in fields(config) if f.default is not MISSING}
-    return defaults | saved | {"epochs": config.epochs} == to_plain(config)
+    current = to_plain(config)
+    free = {name: current[name] for name in RESUMABLE_CHANGES if name in current}
+    return defaults | saved | free == current
 
 
 def _init_from(model: RiskMapGenerator, model_config: ModelConfig, checkpoint: Path) -> None:
@@ -198,8 +261,14 @@ def _init_from(model: RiskMapGenerator, model_config: ModelConfig, checkpoint: P
     model.load_state_dict(with_raster_channels(state, model_config.in_channels) if grows else state)
 
 
-def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> dict:
-    """Train; returns the best epoch's metrics."""
+def train(config: TrainConfig, resume: bool = False, progress: bool = True, on_epoch=None,
+          channels_last: bool | None = None) -> dict:
+    """Train; returns the best epoch's metrics.
+
+    `on_epoch(epoch, record)`, when given, gets each epoch's per-batch training losses and
+    timings: {"losses", "nlls", "train_windows", "val_windows", "train_s" (the pass over the
+    training windows), "data_s" (of which waiting for batches), "val_s" (validation)}.
+    `channels_last`: the network's memory layout (None: `use_channels_last`)."""
     from torch.utils.tensorboard import SummaryWriter
     from tqdm import tqdm
 
@@ -226,6 +295,10 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
     if config.init_checkpoint:
         _init_from(model, model_config, Path(config.init_checkpoint))
     model.to(device)
+    if channels_last is None:
+        channels_last = use_channels_last(device)
+    if channels_last:
+        model.to(memory_format=torch.channels_last)
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr)
     start_epoch, best = 0, {"val_ade_m": math.inf}
     if resume and (out / "last.json").exists():
@@ -240,9 +313,11 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
         start_epoch = previous["epoch"] + 1
         best = previous["best"]
     lock_out_dir(out)   # one writer per run directory (creates it)
+    attach_sample_cache(dataset, config, out, progress)
     data = dataset_sidecar(dataset, train_idx, val_idx)
     writer = SummaryWriter(str(out / "tb"), purge_step=start_epoch)
-    val_loader = DataLoader(Subset(dataset, val_idx), batch_size=config.batch_size)
+    workers = sample_workers(config.workers, device)
+    val_loader = _loader(Subset(dataset, val_idx), config.batch_size, workers)
     log_path = out / "log.csv"
     fields = ["epoch", "train_loss", "train_nll", "val_nll", "val_ade_m", "val_fde_m", "seconds"]
     if start_epoch == 0:
@@ -254,13 +329,19 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
         order = torch.randperm(len(train_idx),
                                generator=torch.Generator().manual_seed(config.seed * 100003 + epoch))
         augmented.set_epoch(epoch)
-        loader = DataLoader(Subset(augmented, [train_idx[i] for i in order]),
-                            batch_size=config.batch_size)
-        losses, nlls = [], []
+        loader = _loader(Subset(augmented, [train_idx[i] for i in order]), config.batch_size,
+                         workers)
+        losses, nlls, waited = [], [], 0.0
         bar = tqdm(loader, desc=f"epoch {epoch + 1}/{config.epochs}", disable=not progress,
                    leave=False)
-        for batch in bar:
-            batch = _to(batch, device)
+        batches = iter(bar)
+        while True:
+            asked = time.perf_counter()
+            batch = next(batches, None)
+            waited += time.perf_counter() - asked
+            if batch is None:
+                break
+            batch = _to(batch, device, channels_last)
             risk = model(batch["raster"], batch["motion"])
             step = irl_step(risk, batch, irl)
             optimizer.zero_grad()
@@ -270,8 +351,13 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True) -> d
             losses.append(step.loss.item())
             nlls.append(demo_negative_log_likelihood(step.policy, batch["demo_path"]).mean().item())
             bar.set_postfix(nll=f"{np.mean(nlls):.2f}")
+        trained = time.perf_counter()
         metrics = {"train_loss": float(np.mean(losses)), "train_nll": float(np.mean(nlls)),
-                   **_evaluate(model, val_loader, config, irl, dataset.grid, device)}
+                   **_evaluate(model, val_loader, config, irl, dataset.grid, device, channels_last)}
+        if on_epoch is not None:
+            on_epoch(epoch, {"losses": losses, "nlls": nlls, "train_windows": len(train_idx),
+                             "val_windows": len(val_idx), "train_s": trained - started,
+                             "data_s": waited, "val_s": time.perf_counter() - trained})
         metrics["seconds"] = round(time.perf_counter() - started, 1)
         for key, value in metrics.items():
             writer.add_scalar(key, value, epoch)
