@@ -41,9 +41,11 @@ demo: $(STAMP)
 	$(BIN)/adversary report $(DEMO_OUT)/stress --out $(DEMO_OUT)
 	@echo "demo: report in $(DEMO_OUT)/report.html (with the scenario search), figures in $(DEMO_OUT)/figures, closed-loop runs (and frames) in $(DEMO_OUT)/drive"
 
+# Planning, training, closed loop, CRASH and the demo campaign, against BENCH_REF (default: the
+# previous commit) checked out in a temporary worktree, in one invocation: experiments/results/bench.md
+BENCH_REF ?= HEAD~1
 bench: $(STAMP)
-	$(BIN)/python experiments/bench_collect.py
-	$(BIN)/python experiments/bench_planner.py
+	$(BIN)/python experiments/bench_all.py --reference $(BENCH_REF)
 
 clean:
 	rm -rf out .pytest_cache
