@@ -18,6 +18,7 @@ from rasterize.errors import InputError
 from riskmap.infra.atomic import write_json
 from riskmap.infra.config_mapping import to_plain
 from riskmap.infra.provenance import provenance
+from riskmap.infra.rundir import lock_out_dir
 
 
 @dataclass(frozen=True)
@@ -71,6 +72,7 @@ def run_campaign(config: CampaignConfig, out: Path, options: RunOptions = RunOpt
         raise InputError(f"--out {out} is not empty; choose a new directory")
     check_planners(config)
     check_attack_models(config)
+    lock_out_dir(out)   # one writer per campaign directory (creates it)
     write_json(meta_path, {**meta, **provenance()})
     store = ResultStore(out)
     jobs = config.jobs()

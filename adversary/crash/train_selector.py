@@ -33,7 +33,7 @@ from adversary.crash.selection import SelectionModule, candidates, distance_weig
 from adversary.crash.train_traffic import load_traffic_model, load_windows, scene_collides
 from riskmap.infra.atomic import write_json
 from riskmap.infra.checkpoint import load_weights, read_sidecar, save_checkpoint
-from riskmap.infra.rundir import refuse_unless_resume
+from riskmap.infra.rundir import lock_out_dir, refuse_unless_resume
 
 CHECKPOINT_KIND = "crash_selector"
 
@@ -106,7 +106,7 @@ def train_selector(traffic_checkpoint: Path, data: list[Path], out: Path,
                    progress: bool = True) -> dict:
     out = Path(out)
     refuse_unless_resume(out, "a run", None, resume)
-    out.mkdir(parents=True, exist_ok=True)
+    lock_out_dir(out)   # one writer per run directory (creates it)
     torch.manual_seed(config.seed)
     model, features, traffic_meta = load_traffic_model(traffic_checkpoint)
     for param in model.parameters():

@@ -34,7 +34,7 @@ from rasterize.frames import box_corners
 from rasterize.geometry import boxes_overlap
 from riskmap.infra.atomic import write_json
 from riskmap.infra.checkpoint import load_weights, read_sidecar, save_checkpoint
-from riskmap.infra.rundir import refuse_unless_resume
+from riskmap.infra.rundir import lock_out_dir, refuse_unless_resume
 
 CHECKPOINT_KIND = "traffic_cvae"
 
@@ -199,7 +199,7 @@ def train_traffic(data: list[Path], out: Path, config: TrainTrafficConfig = Trai
     features = features or FeatureConfig()
     out = Path(out)
     refuse_unless_resume(out, "a run", None, resume)
-    out.mkdir(parents=True, exist_ok=True)
+    lock_out_dir(out)   # one writer per run directory (creates it)
     torch.manual_seed(config.seed)
     rng = np.random.default_rng(config.seed)
     started = time.perf_counter()

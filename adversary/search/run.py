@@ -43,7 +43,7 @@ from adversary.search.scenarios import Template, get_template
 from rasterize.errors import InputError
 from riskmap.infra.atomic import write_json
 from riskmap.infra.provenance import provenance
-from riskmap.infra.rundir import check_same_settings, refuse_unless_resume
+from riskmap.infra.rundir import check_same_settings, lock_out_dir, refuse_unless_resume
 
 ALGORITHMS = ("nsga2", "random")
 
@@ -125,6 +125,7 @@ def _random_batch(problem, n: int, rng: np.random.Generator, template: Template)
 
 def _check_out(out: Path, config: SearchConfig, resume: bool) -> None:
     refuse_unless_resume(out, "evaluations", "evaluations", resume)
+    lock_out_dir(out)   # one writer per search directory (creates it)
     if resume:
         check_same_settings(out, "run.json", {"config": asdict(config)}, may_change=("config.workers",))
 

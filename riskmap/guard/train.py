@@ -24,7 +24,7 @@ from riskmap.guard.metrics import binary_metrics
 from riskmap.guard.tgat import TGAT
 from riskmap.infra.atomic import atomic_write, write_json
 from riskmap.infra.checkpoint import save_checkpoint
-from riskmap.infra.rundir import refuse_unless_resume
+from riskmap.infra.rundir import lock_out_dir, refuse_unless_resume
 
 CHECKPOINT_KIND = "guard_tgat"
 ALERT_THRESHOLD = 0.6     # the online threshold of the paper; metrics are also given at 0.5
@@ -63,6 +63,7 @@ def train(data: Path, out: Path, config: GuardTrainConfig = GuardTrainConfig(), 
     out = Path(out)
     state_path = out / "state.pt"
     refuse_unless_resume(out, "a guard training run", "state.pt", resume)
+    lock_out_dir(out)   # one writer per run directory (creates it)
     torch.manual_seed(config.seed)
     splits = {name: _tensors(load_split(data, name)) for name in ("train", "val", "seen", "unseen")}
     model = TGAT(config.model)

@@ -110,3 +110,51 @@ def test_collect_and_train_take_the_lock_too(tmp_path):
         for h in holders:
             h.kill()
             h.wait()
+
+
+def test_every_other_long_writer_takes_the_lock(tmp_path):
+    """Traffic-model and selector training, the scenario search, guard training and the campaign:
+    resumed on a folder another run is writing, each stops at once with one line and writes
+    nothing (without --resume the folder's content already stops them)."""
+    import subprocess
+    import sys
+
+    from adversary.campaign.config import load_campaign
+    from adversary.campaign.run import RunOptions, run_campaign
+    from adversary.crash.train_selector import train_selector
+    from adversary.crash.train_traffic import train_traffic
+    from adversary.search.run import SearchConfig, search
+    from riskmap.guard.train import train as train_guard
+
+    names = ("traffic", "selector", "search", "guard", "campaign")
+    outs = {name: tmp_path / name for name in names}
+    holder = subprocess.Popen(
+        [sys.executable, "-c",
+         "import time; from riskmap.infra.rundir import lock_out_dir; "
+         + "".join(f"lock_out_dir({str(p)!r}); " for p in outs.values())
+         + "print('held', flush=True); time.sleep(60)"], stdout=subprocess.PIPE, text=True)
+    config = tmp_path / "campaign.yaml"
+    config.write_text("name: locked\nseed: 0\nplanners: [idm]\n"
+                      "scenarios: [{env: highway-v0, seed: 0, episodes: 1}]\n"
+                      "attacks: [{name: natural}]\n")
+    calls = {
+        "traffic": lambda: train_traffic([tmp_path / "nowhere"], outs["traffic"], resume=True,
+                                         progress=False),
+        "selector": lambda: train_selector(tmp_path / "nowhere", [tmp_path / "nowhere"],
+                                           outs["selector"], resume=True, progress=False),
+        "search": lambda: search(SearchConfig(planner="idm", template="cut_in", pop=2, gen=1),
+                                 outs["search"], resume=True, progress=False, frames=False),
+        "guard": lambda: train_guard(tmp_path / "nowhere", outs["guard"], resume=True,
+                                     progress=False),
+        "campaign": lambda: run_campaign(load_campaign(config), outs["campaign"],
+                                         RunOptions(resume=True, progress=False)),
+    }
+    try:
+        assert holder.stdout.readline().strip() == "held"
+        for name in names:
+            with pytest.raises(InputError, match="being written by another run"):
+                calls[name]()
+            assert sorted(p.name for p in outs[name].iterdir()) == [".lock"], name
+    finally:
+        holder.kill()
+        holder.wait()
