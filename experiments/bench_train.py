@@ -114,7 +114,8 @@ def main() -> None:
     parser.add_argument("--max-windows", type=int, default=256)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--resolution", type=int, default=TrainConfig.resolution)
-    parser.add_argument("--detail", action="store_true", help="also the steps between")
+    parser.add_argument("--detail", action="store_true",
+                        help="also the parts alone and `new` with one sample worker")
     parser.add_argument("--wait-idle", type=float, default=0.0, metavar="S",
                         help="before each run wait up to S seconds for other processes to idle "
                              "(a shared machine)")
