@@ -182,12 +182,18 @@ def _spaced(flat: np.ndarray, moves: np.ndarray, count: int, grid: GridConfig) -
     return p_lo + frac[..., None] * (p_hi - p_lo)
 
 
+@lru_cache(maxsize=8)
+def _projection(dimensions: int) -> np.ndarray:
+    """A fixed random direction in `dimensions` dimensions (made once per width, not per plan)."""
+    return np.random.default_rng(0).normal(size=dimensions)
+
+
 def distinct_at_least(rows: np.ndarray, k: int) -> int:
     """min(k, number of distinct rows of `rows` [S, D]). Rows are first told apart by one random
     projection (a few microseconds for 1000 rows): equal rows project equally, so if k
     projections differ there are at least k distinct rows; only otherwise is the exact
     row-wise unique taken."""
-    projected = rows @ np.random.default_rng(0).normal(size=rows.shape[1])
+    projected = rows @ _projection(rows.shape[1])
     if len(np.unique(projected)) >= k:
         return k
     return min(k, len(np.unique(rows, axis=0)))

@@ -237,16 +237,7 @@ class _LaneFinder:
         if not (math.isfinite(x) and math.isfinite(y) and (h is None or math.isfinite(h))):
             return None
         if len(self.entries) <= self.FEW_LANES:             # bounds of the point itself
-            order = []
-            for k, b in enumerate(self.bounds):
-                if b is None:
-                    order.append((-math.inf, k))
-                    continue
-                xmin, xmax, ymin, ymax, slack = b
-                gx = xmin - x if x < xmin else (x - xmax if x > xmax else 0.0)
-                gy = ymin - y if y < ymin else (y - ymax if y > ymax else 0.0)
-                order.append(((math.hypot(gx, gy) if gx and gy else gx + gy) - slack - _TOL_M, k))
-            order.sort()
+            order = self._order(x, y, x, y)
         else:                                               # cached bounds of its grid cell
             key = (math.floor(x / self.CELL_M), math.floor(y / self.CELL_M))
             order = self.cells.get(key) or self._cell(key)
