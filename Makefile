@@ -10,7 +10,7 @@ STAMP  := $(VENV)/.installed
 TORCH_PIN := torch==2.14.1 torchvision==0.29.1
 DEMO_OUT  ?= out/demo
 
-.PHONY: setup test demo bench clean
+.PHONY: setup test test-faults demo bench clean
 
 setup: $(STAMP)
 
@@ -25,6 +25,11 @@ $(STAMP): pyproject.toml constraints.txt
 test: $(STAMP)
 	$(BIN)/lint-imports --no-logo
 	$(BIN)/python -m pytest -q
+
+# The longer kill-and-resume sweep: every long command killed after its first atomic write and
+# at its last one too (make test kills each halfway only).
+test-faults: $(STAMP)
+	$(BIN)/python -m pytest -q -m faults tests/reliability
 
 demo: $(STAMP)
 	$(BIN)/riskmap collect --env highway-v0 --episodes 2 --seed 2000 --out $(DEMO_OUT)/data/highway --workers 2 --resume

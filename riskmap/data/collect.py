@@ -26,7 +26,7 @@ from rasterize.scene_io import pack_scenes
 from riskmap.infra.atomic import write_json, write_npz
 from riskmap.infra.parallel import run_parallel
 from riskmap.infra.provenance import provenance
-from riskmap.infra.rundir import lock_out_dir
+from riskmap.infra.rundir import holds_work, lock_out_dir
 from riskmap.sim.episode import FAMILY_SETUPS, Episode, FamilySetup, make_env
 from riskmap.sim.rollout import LoopConfig, drive_world
 from riskmap.sim.yielding import DEMONSTRATORS, demonstrator
@@ -166,7 +166,7 @@ def _check_out_dir(out: Path, config: CollectConfig, resume: bool) -> None:
                 {k: v for k, v in mine.items() if k != "episodes"}:
             raise InputError(f"--out {out} was collected with a different configuration; "
                              "resume with the same --env/--seed or choose another --out")
-    elif out.exists() and any(out.iterdir()):
+    elif holds_work(out):
         raise InputError(f"--out {out} exists and is not a dataset directory; choose another --out")
 
 
@@ -192,8 +192,10 @@ def write_index_and_manifest(out: Path, config: CollectConfig, infos: list[dict]
         "last_run_elapsed_s": round(elapsed_s, 3),
         **(extra or {}),
     }
-    write_json(out / INDEX, index)
+    # The manifest first: it is what --resume recognises a dataset by (a run killed between the
+    # two writes resumes and rewrites the index).
     write_json(out / MANIFEST, manifest)
+    write_json(out / INDEX, index)
     return manifest
 
 

@@ -24,9 +24,10 @@ from riskmap.infra.provenance import provenance
 
 
 def holds_work(path: Path) -> bool:
-    """True for an existing file or a non-empty directory."""
+    """True for an existing file or a directory holding anything but its lock file (a run killed
+    right after claiming its directory left only that)."""
     path = Path(path)
-    return path.is_file() or (path.is_dir() and any(path.iterdir()))
+    return path.is_file() or (path.is_dir() and any(p.name != LOCK_FILE for p in path.iterdir()))
 
 
 def read_settings(path: Path) -> dict:
@@ -80,7 +81,8 @@ _HELD: dict[Path, int] = {}      # out directory -> descriptor of its lock, for 
 def lock_out_dir(out: Path) -> None:
     """Become the one writer of `out`: an advisory lock on `out/.lock`, held until this process
     ends (the system drops it when the process dies, killed or not). Another process holding it
-    makes this an InputError at once; this process may claim its own directory again."""
+    makes this an InputError at once; this process may claim its own directory again.
+    The new writer then deletes the temporary files of atomic writes a killed writer left."""
     import fcntl
     import os
 
@@ -96,6 +98,8 @@ def lock_out_dir(out: Path) -> None:
         raise InputError(f"--out {out} is being written by another run right now; wait for it to "
                          "finish or choose another --out") from None
     _HELD[out] = fd
+    for orphan in out.rglob(".*.tmp"):
+        orphan.unlink(missing_ok=True)
 
 
 def claim_out_dir(out: Path, *, holds: str, marker: str | None, resume: bool, settings_file: str,
