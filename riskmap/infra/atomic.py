@@ -53,6 +53,11 @@ def atomic_write(path: Path, write) -> None:
             os.fsync(f.fileno())
         _fault_point(path, "mid")
         os.replace(tmp, path)
+    except OSError as err:
+        Path(tmp).unlink(missing_ok=True)
+        if err.filename is None:   # raised writing to the file object: name the target
+            raise OSError(err.errno, err.strerror, str(path)) from err
+        raise
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise

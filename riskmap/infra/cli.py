@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import errno
 import sys
 import types
 import typing
@@ -37,8 +38,12 @@ def run_command(prog: str, parser: argparse.ArgumentParser, argv: list[str] | No
         # one line naming it, not a traceback.
         command = getattr(args, "command", None)
         where = f"{err.filename}: " if err.filename else ""
+        if err.errno in (errno.ENOSPC, errno.EDQUOT):
+            fix = "free some space and rerun with --resume (finished work is kept)"
+        else:
+            fix = "check that the path exists and that you may write there"
         print(f"{prog}{' ' + command if command else ''}: error: {where}{err.strerror or err}; "
-              "check that the path exists and that you may write there", file=sys.stderr)
+              f"{fix}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"{prog}: interrupted; finished work is kept, rerun with --resume", file=sys.stderr)
