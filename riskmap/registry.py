@@ -13,10 +13,19 @@ Built in:
     cnn:PATH, cnn_lstm:PATH (or cnn-lstm:PATH), rvsg:PATH
                      behaviour-cloning baselines from `riskmap train-baseline` checkpoints
 
-Plug-ins: any other `NAME:ARG` is looked up in the entry-point group `riskmap.planners`, whose
-entry `NAME` is a factory `factory(ARG, seed=...)` returning a planner. The guard is one
-(`guard`, `guarded`, `guard-always`, declared in pyproject.toml): it wraps a planner made by this
-registry, so it sits above it and the registry never imports it.
+Your own planner, with no change to the toolkit:
+
+    py:package.module:Factory[?key=value&...]
+                     `Factory(key=value, ..., seed=SEED)` (seed only if it takes one), imported
+                     from any module on the path; values are read as int, finite float,
+                     true/false or text (URL-quoted where they hold `&`, `=` or `?`)
+    NAME:ARG         entry `NAME` of the entry-point group `riskmap.planners` (an installed
+                     package declares it), called as `factory(ARG, seed=SEED)`
+
+Either must return a planner (`riskmap.sim.plan.Planner`: `reset(scene)`, `plan(scene) -> Plan`,
+or `drives_itself = True`); anything else is a one-line error naming the SPEC. The guard is an
+entry-point plug-in (`guard`, `guarded`, `guard-always`, declared in pyproject.toml): it wraps a
+planner made by this registry, so it sits above it and the registry never imports it.
 """
 
 from __future__ import annotations
@@ -26,7 +35,7 @@ from riskmap.sim.plan import HumanDriver
 
 PLUGIN_GROUP = "riskmap.planners"
 SPECS = ("idm", "yielding", "cv", "replay", "riskmap:PATH", "cnn:PATH", "cnn_lstm:PATH", "rvsg:PATH",
-         "guard:SPEC", "guard-always:SPEC")
+         "guard:SPEC", "guard-always:SPEC", "py:module:Factory[?key=value&...]")
 
 
 def make_planner(spec: str, seed: int = 0, goal_variance: float | None = None):
@@ -55,10 +64,106 @@ def make_planner(spec: str, seed: int = 0, goal_variance: float | None = None):
         from riskmap.planner.bc import BCPlanner
 
         return BCPlanner.load(arg, expected_kind=kind)
+    if kind == "py" and arg:
+        factory, kwargs = _from_python(spec, arg, seed)
+        return _made(spec, factory, **kwargs)
     factory = _plugin(kind) if arg else None
     if factory is not None:
-        return factory(arg, seed=seed)
+        return _made(spec, factory, arg, seed=seed)
     raise InputError(f"unknown planner spec {spec!r}; use one of {', '.join(SPECS)}")
+
+
+def is_planner(obj) -> bool:
+    """Whether `obj` keeps the Planner contract's shape: an instance that drives itself, or one
+    with callable `reset` and `plan`."""
+    if isinstance(obj, type):
+        return False
+    return bool(getattr(obj, "drives_itself", False)) or all(
+        callable(getattr(obj, method, None)) for method in ("reset", "plan"))
+
+
+def _made(spec: str, factory, *args, **kwargs):
+    """`factory(*args, **kwargs)`, checked to be a planner; a factory that fails is one line."""
+    try:
+        planner = factory(*args, **kwargs)
+    except InputError:
+        raise
+    except Exception as err:  # noqa: BLE001 - a user's factory may raise anything
+        raise InputError(f"planner {spec!r} could not be made ({type(err).__name__}: {err}); "
+                         "fix its factory or its keys") from None
+    if not is_planner(planner):
+        raise InputError(f"planner {spec!r} made a {type(planner).__name__}, not a planner; its "
+                         "factory must return an object with reset(scene) and plan(scene) -> Plan "
+                         "(README, the planner contract)")
+    return planner
+
+
+def _literal(text: str):
+    """A `py:` SPEC value: int, finite float, true/false, else the text itself ("nan" stays text)."""
+    import math
+
+    if text.lower() in ("true", "false"):
+        return text.lower() == "true"
+    for kind in (int, float):
+        try:
+            value = kind(text)
+        except ValueError:
+            continue
+        if math.isfinite(value):
+            return value
+    return text
+
+
+def _from_python(spec: str, arg: str, seed: int):
+    """`py:package.module:Factory?key=value&...` -> (Factory, {key: value, ..., [seed: seed]})."""
+    import importlib
+    import inspect
+    from urllib.parse import parse_qsl
+
+    target, _, query = arg.partition("?")
+    module_name, _, attribute = target.partition(":")
+    if not module_name or not attribute:
+        raise InputError(f"planner {spec!r}: write py:package.module:Factory[?key=value&...]")
+    try:
+        pairs = parse_qsl(query, keep_blank_values=True, strict_parsing=bool(query))
+    except ValueError:
+        raise InputError(f"planner {spec!r}: the part after ? must be key=value pairs joined by &"
+                         ) from None
+    kwargs = {}
+    for key, value in pairs:
+        if key in kwargs:
+            raise InputError(f"planner {spec!r} gives {key!r} twice; give it once")
+        kwargs[key] = _literal(value)
+    try:
+        module = importlib.import_module(module_name)
+    except Exception as err:  # noqa: BLE001 - any failure to import is the user's module's
+        raise InputError(f"planner {spec!r}: module {module_name!r} cannot be imported "
+                         f"({type(err).__name__}: {err}); install it or add it to PYTHONPATH"
+                         ) from None
+    factory = module
+    for part in attribute.split("."):
+        factory = getattr(factory, part, None)
+        if factory is None:
+            raise InputError(f"planner {spec!r}: {module_name} has no {attribute!r}; name a "
+                             "factory defined there")
+    if not callable(factory):
+        raise InputError(f"planner {spec!r}: {attribute} is a {type(factory).__name__}, not a "
+                         "factory; name a class or function that returns a planner")
+    try:
+        signature = inspect.signature(factory)
+    except (TypeError, ValueError):
+        signature = None
+    if signature is not None:
+        takes_any = any(p.kind is p.VAR_KEYWORD for p in signature.parameters.values())
+        if "seed" not in kwargs and (takes_any or "seed" in signature.parameters):
+            kwargs["seed"] = seed
+        try:
+            signature.bind(**kwargs)
+        except TypeError as err:
+            names = ", ".join(signature.parameters) or "nothing"
+            raise InputError(f"planner {spec!r}: {attribute} does not take these keys ({err}); "
+                             f"it takes {names}") from None
+    return factory, kwargs
 
 
 def _plugin(name: str):

@@ -55,6 +55,27 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_check_planner(args: argparse.Namespace) -> int:
+    import numpy as np
+
+    from riskmap.evaluation.check_planner import CheckConfig, check_planner
+
+    config = CheckConfig(envs=args.envs, episodes=args.episodes, episode_s=args.seconds,
+                         seed=args.seed)
+    print(f"checking {args.spec} on {', '.join(config.envs)} ({config.episodes} episode(s) of "
+          f"{config.episode_s:g} s each)", flush=True)
+    findings = check_planner(args.spec, config, progress=not args.quiet)
+    if findings.times_s:
+        times = 1000 * np.asarray(findings.times_s)
+        print(f"{findings.plans} plans; {np.median(times):.1f} ms median, {times.max():.1f} ms "
+              "max per call (the loop replans every 500 ms)")
+    for line in findings.lines():
+        print(f"BROKEN: {line}")
+    print(f"{args.spec}: {len(findings.counts)} contract problem(s)" if findings.counts
+          else f"{args.spec}: keeps the planner contract on every scene tried")
+    return 1 if findings.counts else 0
+
+
 def _cmd_tune_goal_variance(args: argparse.Namespace) -> int:
     from riskmap.evaluation.open_loop import tune_goal_variance
 
@@ -89,6 +110,18 @@ def add_parsers(sub) -> None:
     p.add_argument("--resume", action="store_true")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=_cmd_drive)
+
+    p = sub.add_parser("check-planner", help="drive a planner on a few scenes of each family and "
+                       "say, one line each, where it breaks the planner contract")
+    p.add_argument("spec", help="planner SPEC, e.g. py:package.module:Factory or riskmap:PATH")
+    p.add_argument("--envs", type=comma_list, default=("highway-v0", "merge-v0", "roundabout-v0",
+                                                      "intersection-v0"),
+                   help="comma-separated highway-env ids (default: one of each family)")
+    p.add_argument("--episodes", type=positive_int, default=1, help="episodes per family")
+    p.add_argument("--seconds", type=float, default=8.0, help="seconds driven per episode")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=_cmd_check_planner)
 
     p = sub.add_parser("evaluate", help="closed-loop benchmark of planners (Table I metrics)")
     p.add_argument("--planners", required=True,

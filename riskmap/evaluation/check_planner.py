@@ -1,0 +1,179 @@
+"""`riskmap check-planner SPEC`: drive a planner on a few scenes of each family and say, one line
+each, where it breaks the planner contract (README, "The planner contract").
+
+The planner drives short closed-loop episodes through the one rollout loop. Every plan it makes is
+checked; a plan that breaks the contract (or a call that raises) is recorded and replaced by a
+constant-velocity plan so that the episode, and the check, go on. Then a few of the scenes it saw
+are planned again by two fresh planners of the same SPEC and seed (determinism), and the time per
+call is compared with the replan period.
+"""
+
+from __future__ import annotations
+
+import re
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, Plan
+
+FAMILY_ENVS = ("highway-v0", "merge-v0", "roundabout-v0", "intersection-v0")
+REPLAN_PERIOD_S = 0.5        # the rollout replans at 2 Hz
+MAX_SPEED_MS = 60.0          # faster than any road vehicle here: the waypoints are not metres
+MAX_ACCEL_MS2 = 10.0         # beyond hard braking: the first waypoint does not start at the ego
+KMH_PER_MS = 3.6
+
+
+@dataclass(frozen=True)
+class CheckConfig:
+    envs: tuple[str, ...] = FAMILY_ENVS
+    episodes: int = 1             # per family
+    episode_s: float = 8.0        # seconds driven per episode
+    seed: int = 0
+    determinism_scenes: int = 3   # scenes planned again by fresh planners
+
+
+@dataclass
+class Findings:
+    """Breaches by kind (the message with its numbers blanked): count, first message and where."""
+
+    counts: Counter = field(default_factory=Counter)
+    first: dict = field(default_factory=dict)
+    plans: int = 0
+    times_s: list = field(default_factory=list)
+
+    def add(self, message: str, where: str) -> None:
+        kind = re.sub(r"\d+(\.\d+)?", "#", message)
+        self.counts[kind] += 1
+        self.first.setdefault(kind, (message, where))
+
+    def lines(self) -> list[str]:
+        return [f"{self.first[kind][0]} ({count}x, first on {self.first[kind][1]})"
+                for kind, count in self.counts.items()]
+
+
+def _cv(scene) -> Plan:
+    speed = float(scene.ego_state()[4])
+    x = speed * PLAN_DT_S * np.arange(1, PLAN_STEPS + 1)
+    return Plan(np.stack([x, np.zeros(PLAN_STEPS)], axis=1))
+
+
+def plan_problems(plan, speed: float) -> list[str]:
+    """What is wrong with `plan` made at ego speed `speed` (m/s); empty if nothing."""
+    if not isinstance(plan, Plan):
+        return [f"plan() returned a {type(plan).__name__}, not a riskmap.sim.plan.Plan"]
+    try:
+        waypoints = np.asarray(plan.waypoints, dtype=np.float64)
+    except (TypeError, ValueError):
+        return ["Plan.waypoints is not numeric; give a float array [12, 2]"]
+    if waypoints.shape != (PLAN_STEPS, 2):
+        return [f"Plan.waypoints has shape {waypoints.shape}; the contract is [12, 2] (6 s at 0.5 s)"]
+    if not np.isfinite(waypoints).all():
+        return ["Plan.waypoints holds NaN or inf; every waypoint must be finite"]
+    problems = []
+    steps = np.linalg.norm(np.diff(np.vstack([[0.0, 0.0], waypoints]), axis=0), axis=1) / PLAN_DT_S
+    reach = speed * PLAN_DT_S + 0.5 * MAX_ACCEL_MS2 * PLAN_DT_S ** 2 + 1.0
+    first = float(np.linalg.norm(waypoints[0]))
+    if speed > 3.0 and abs(steps[0] / speed - KMH_PER_MS) < 0.4:
+        problems.append(f"the first step implies {steps[0]:.1f} m/s at a speed of {speed:.1f} m/s "
+                        "(3.6x: km/h?); the waypoints are metres 0.5 s apart")
+    elif first > reach:
+        problems.append(f"the first waypoint is {first:.0f} m from the ego at {speed:.1f} m/s; "
+                        "waypoints are in the ego frame (origin at the ego, x forward, y left), "
+                        "not world coordinates")
+    elif steps.max() > MAX_SPEED_MS:
+        problems.append(f"the waypoints imply {steps.max():.0f} m/s; they are metres 0.5 s apart")
+    # In one second at speed no vehicle turns by more than about 60 degrees: the plan's first
+    # second must point forward (x), else its axes are not the ego frame's.
+    second = waypoints[round(1.0 / PLAN_DT_S) - 1]
+    if speed > 3.0 and first <= reach and np.linalg.norm(second) > 0.5 * speed * 1.0:
+        angle = np.degrees(abs(np.arctan2(second[1], second[0])))
+        if angle > 120:
+            problems.append("the plan runs backwards at speed; x points forward in the ego frame")
+        elif angle > 60:
+            problems.append("the plan runs sideways at speed; x is forward and y left (swapped axes?)")
+    return problems
+
+
+class _Checking:
+    """Wraps the planner under test: checks every plan, never lets a bad one reach the loop."""
+
+    def __init__(self, planner, findings: Findings, env_id: str):
+        self.planner, self.findings, self.env_id = planner, findings, env_id
+        self.scenes: list = []
+
+    def reset(self, scene) -> None:
+        try:
+            self.planner.reset(scene)
+        except Exception as err:  # noqa: BLE001 - what a planner raises is a finding
+            self.findings.add(f"reset() raised {type(err).__name__}: {err}", self.env_id)
+
+    def plan(self, scene) -> Plan:
+        where = f"{self.env_id} at {scene.time_s:.1f} s"
+        self.scenes.append(scene)
+        started = time.perf_counter()
+        try:
+            plan = self.planner.plan(scene)
+        except Exception as err:  # noqa: BLE001
+            self.findings.add(f"plan() raised {type(err).__name__}: {err}", where)
+            return _cv(scene)
+        self.findings.times_s.append(time.perf_counter() - started)
+        self.findings.plans += 1
+        problems = plan_problems(plan, float(scene.ego_state()[4]))
+        for problem in problems:
+            self.findings.add(problem, where)
+        return _cv(scene) if problems else plan
+
+
+def _determinism(spec: str, config: CheckConfig, scenes: list, findings: Findings) -> None:
+    from riskmap.registry import make_planner
+
+    if not scenes or config.determinism_scenes < 1:
+        return
+    picked = scenes[:: max(1, len(scenes) // config.determinism_scenes)][: config.determinism_scenes]
+    twins = [make_planner(spec, seed=config.seed) for _ in range(2)]   # asked the same, in step
+    for scene in picked:
+        answers = []
+        for planner in twins:
+            try:
+                planner.reset(scene)
+                answers.append(np.asarray(planner.plan(scene).waypoints, dtype=np.float64))
+            except Exception:  # noqa: BLE001 - already reported while driving
+                return
+        if answers[0].shape != answers[1].shape or not np.allclose(answers[0], answers[1],
+                                                                     atol=1e-6, equal_nan=True):
+            findings.add("two planners made with the same SPEC and seed plan the same scene "
+                         "differently; seed every random draw from `seed`", f"t={scene.time_s:.1f} s")
+
+
+def check_planner(spec: str, config: CheckConfig = CheckConfig(), progress: bool = False) -> Findings:
+    """Drive `spec` on `config.episodes` short episodes of each family; the breaches found."""
+    from riskmap.registry import make_planner
+    from riskmap.sim.episode import cached_env
+    from riskmap.sim.plan import drives_itself
+    from riskmap.sim.rollout import DriveConfig, drive_episode
+
+    findings = Findings()
+    planner = make_planner(spec, seed=config.seed)
+    if drives_itself(planner):
+        return findings            # the world's own IDM/MOBIL ego: no plans to check
+    scenes = []
+    for env_id in config.envs:
+        drive = DriveConfig(env_id=env_id, episodes=config.episodes, seed=config.seed,
+                            episode_s=config.episode_s)
+        for episode in range(config.episodes):
+            checking = _Checking(planner, findings, env_id)
+            drive_episode(cached_env(env_id), checking, drive, episode)
+            scenes.extend(checking.scenes[1:2])    # one scene per episode for determinism
+            if progress:
+                print(f"  {env_id} episode {episode}: {findings.plans} plans checked so far",
+                      flush=True)
+    _determinism(spec, config, scenes, findings)
+    if findings.times_s:
+        median = float(np.median(findings.times_s))
+        if median > REPLAN_PERIOD_S:
+            findings.add(f"a plan takes {1000 * median:.0f} ms (median); the loop replans every "
+                         f"{1000 * REPLAN_PERIOD_S:.0f} ms", "every family")
+    return findings

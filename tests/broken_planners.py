@@ -1,0 +1,55 @@
+"""Planners that break the planner contract on purpose, for `riskmap check-planner` and plug-in
+tests: SPEC `py:tests.broken_planners:Broken?fault=NAME` (run from the repository root)."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from rasterize.frames import ego_pose
+from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, Plan
+
+FAULTS = ("none", "world_frame", "kmh", "nan", "shape", "raise", "unseeded", "slow", "not_a_plan",
+          "swapped_axes")
+
+
+class Broken:
+    """Constant velocity, with `fault` added."""
+
+    def __init__(self, fault: str = "none", seed: int = 0):
+        if fault not in FAULTS:
+            raise ValueError(f"fault must be one of {FAULTS}")
+        self.fault, self.seed = fault, seed
+        self.rng = np.random.default_rng(None if fault == "unseeded" else seed)
+
+    def reset(self, scene) -> None:
+        pass
+
+    def plan(self, scene):
+        speed = float(scene.ego_state()[4])
+        ahead = speed * PLAN_DT_S * np.arange(1, PLAN_STEPS + 1)
+        waypoints = np.stack([ahead, np.zeros(PLAN_STEPS)], axis=1)
+        waypoints[:, 1] += 0.01 * self.rng.standard_normal(PLAN_STEPS)
+        if self.fault == "world_frame":
+            origin, _ = ego_pose(scene)
+            waypoints = waypoints + origin + 500.0
+        elif self.fault == "kmh":
+            waypoints = waypoints * 3.6
+        elif self.fault == "nan":
+            waypoints[5] = np.nan
+        elif self.fault == "shape":
+            waypoints = waypoints[:6]
+        elif self.fault == "raise":
+            raise RuntimeError("this planner always fails")
+        elif self.fault == "slow":
+            time.sleep(0.6)
+        elif self.fault == "not_a_plan":
+            return waypoints
+        elif self.fault == "swapped_axes":
+            waypoints = waypoints[:, ::-1].copy()
+        return Plan(waypoints)
+
+
+def not_a_planner(seed: int = 0):
+    return "I am a string"

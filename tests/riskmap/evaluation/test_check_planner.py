@@ -1,0 +1,58 @@
+"""`riskmap check-planner`: every deliberate breach of the planner contract is named, a good
+planner passes."""
+
+import numpy as np
+import pytest
+
+from riskmap.cli import main
+from riskmap.evaluation.check_planner import CheckConfig, check_planner, plan_problems
+from riskmap.sim.plan import Plan
+
+QUICK = CheckConfig(envs=("highway-v0",), episode_s=2.0)
+SPEC = "py:tests.broken_planners:Broken?fault={}"
+
+
+@pytest.mark.parametrize("fault, says", [
+    ("world_frame", "ego frame"),
+    ("kmh", "km/h"),
+    ("nan", "NaN"),
+    ("shape", "shape (6, 2)"),
+    ("raise", "plan() raised RuntimeError: this planner always fails"),
+    ("unseeded", "same SPEC and seed"),
+    ("not_a_plan", "not a riskmap.sim.plan.Plan"),
+    ("swapped_axes", "swapped axes"),
+])
+def test_each_breach_is_named(fault, says):
+    findings = check_planner(SPEC.format(fault), QUICK)
+    assert any(says in line for line in findings.lines()), findings.lines()
+
+
+def test_a_slow_planner_is_named():
+    findings = check_planner(SPEC.format("slow"), CheckConfig(envs=("highway-v0",), episode_s=0.5,
+                                                              determinism_scenes=0))
+    assert any("the loop replans every 500 ms" in line for line in findings.lines())
+
+
+def test_a_planner_that_keeps_the_contract_passes_and_the_cli_says_so(capsys):
+    assert not check_planner(SPEC.format("none"), QUICK).counts
+    assert main(["check-planner", "cv", "--envs", "highway-v0,intersection-v0", "--seconds", "2",
+                 "--quiet"]) == 0
+    assert "keeps the planner contract" in capsys.readouterr().out
+
+
+def test_the_cli_prints_one_line_per_breach_and_exits_1(capsys):
+    assert main(["check-planner", SPEC.format("world_frame"), "--envs", "highway-v0",
+                 "--seconds", "2", "--quiet"]) == 1
+    broken = [line for line in capsys.readouterr().out.splitlines() if line.startswith("BROKEN")]
+    assert len(broken) == 1 and "not world coordinates" in broken[0]
+
+
+def test_plan_problems_units():
+    ahead = np.stack([10.0 * 0.5 * np.arange(1, 13), np.zeros(12)], axis=1)
+    assert plan_problems(Plan(ahead), speed=10.0) == []
+    assert "km/h" in plan_problems(Plan(ahead * 3.6), speed=10.0)[0]
+    sprint = ahead.copy()
+    sprint[6:] += np.arange(1, 7)[:, None] * [40.0, 0.0]
+    assert "imply" in plan_problems(Plan(sprint), speed=10.0)[0]
+    stopped = np.zeros((12, 2))
+    assert plan_problems(Plan(stopped), speed=0.0) == []
