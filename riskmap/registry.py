@@ -17,7 +17,7 @@ Your own planner, with no change to the toolkit:
 
     py:package.module:Factory[?key=value&...]
                      `Factory(key=value, ..., seed=SEED)` (seed only if it takes one), imported
-                     from any module on the path; values are read as int, finite float,
+                     from any module on the path or in the working directory; values are read as int, finite float,
                      true/false or text (URL-quoted where they hold `&`, `=` or `?`)
     NAME:ARG         entry `NAME` of the entry-point group `riskmap.planners` (an installed
                      package declares it), called as `factory(ARG, seed=SEED)`
@@ -118,6 +118,8 @@ def _from_python(spec: str, arg: str, seed: int):
     """`py:package.module:Factory?key=value&...` -> (Factory, {key: value, ..., [seed: seed]})."""
     import importlib
     import inspect
+    import os
+    import sys
     from urllib.parse import parse_qsl
 
     target, _, query = arg.partition("?")
@@ -134,6 +136,8 @@ def _from_python(spec: str, arg: str, seed: int):
         if key in kwargs:
             raise InputError(f"planner {spec!r} gives {key!r} twice; give it once")
         kwargs[key] = _literal(value)
+    if os.getcwd() not in sys.path:
+        sys.path.append(os.getcwd())   # as `python -m` would: a module beside the user is found
     try:
         module = importlib.import_module(module_name)
     except Exception as err:  # noqa: BLE001 - any failure to import is the user's module's

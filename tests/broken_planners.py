@@ -15,13 +15,14 @@ FAULTS = ("none", "world_frame", "kmh", "nan", "shape", "raise", "unseeded", "sl
 
 
 class Broken:
-    """Constant velocity, with `fault` added."""
+    """Constant velocity, with `fault` added (several joined by "+": `kmh+unseeded`)."""
 
     def __init__(self, fault: str = "none", seed: int = 0):
-        if fault not in FAULTS:
+        faults = set(fault.replace("+", " ").split())   # a SPEC query reads "+" as a space
+        if not faults <= set(FAULTS):
             raise ValueError(f"fault must be one of {FAULTS}")
-        self.fault, self.seed = fault, seed
-        self.rng = np.random.default_rng(None if fault == "unseeded" else seed)
+        self.faults, self.seed = faults, seed
+        self.rng = np.random.default_rng(None if "unseeded" in faults else seed)
 
     def reset(self, scene) -> None:
         pass
@@ -31,22 +32,22 @@ class Broken:
         ahead = speed * PLAN_DT_S * np.arange(1, PLAN_STEPS + 1)
         waypoints = np.stack([ahead, np.zeros(PLAN_STEPS)], axis=1)
         waypoints[:, 1] += 0.01 * self.rng.standard_normal(PLAN_STEPS)
-        if self.fault == "world_frame":
+        if "world_frame" in self.faults:
             origin, _ = ego_pose(scene)
             waypoints = waypoints + origin + 500.0
-        elif self.fault == "kmh":
+        if "kmh" in self.faults:
             waypoints = waypoints * 3.6
-        elif self.fault == "nan":
+        if "nan" in self.faults:
             waypoints[5] = np.nan
-        elif self.fault == "shape":
+        if "shape" in self.faults:
             waypoints = waypoints[:6]
-        elif self.fault == "raise":
+        if "raise" in self.faults:
             raise RuntimeError("this planner always fails")
-        elif self.fault == "slow":
+        if "slow" in self.faults:
             time.sleep(0.6)
-        elif self.fault == "not_a_plan":
+        if "not_a_plan" in self.faults:
             return waypoints
-        elif self.fault == "swapped_axes":
+        if "swapped_axes" in self.faults:
             waypoints = waypoints[:, ::-1].copy()
         return Plan(waypoints)
 

@@ -134,7 +134,7 @@ def _determinism(spec: str, config: CheckConfig, scenes: list, findings: Finding
         return
     picked = scenes[:: max(1, len(scenes) // config.determinism_scenes)][: config.determinism_scenes]
     twins = [make_planner(spec, seed=config.seed) for _ in range(2)]   # asked the same, in step
-    for scene in picked:
+    for env_id, scene in picked:
         answers = []
         for planner in twins:
             try:
@@ -145,18 +145,21 @@ def _determinism(spec: str, config: CheckConfig, scenes: list, findings: Finding
         if answers[0].shape != answers[1].shape or not np.allclose(answers[0], answers[1],
                                                                      atol=1e-6, equal_nan=True):
             findings.add("two planners made with the same SPEC and seed plan the same scene "
-                         "differently; seed every random draw from `seed`", f"t={scene.time_s:.1f} s")
+                         "differently; seed every random draw from `seed`",
+                         f"{env_id} at {scene.time_s:.1f} s")
 
 
-def check_planner(spec: str, config: CheckConfig = CheckConfig(), progress: bool = False) -> Findings:
-    """Drive `spec` on `config.episodes` short episodes of each family; the breaches found."""
+def check_planner(spec: str, config: CheckConfig = CheckConfig(), progress: bool = False,
+                  planner=None) -> Findings:
+    """Drive `spec` (`planner`, when already made from it with `config.seed`) on
+    `config.episodes` short episodes of each family; the breaches found."""
     from riskmap.registry import make_planner
     from riskmap.sim.episode import cached_env
     from riskmap.sim.plan import drives_itself
     from riskmap.sim.rollout import DriveConfig, drive_episode
 
     findings = Findings()
-    planner = make_planner(spec, seed=config.seed)
+    planner = planner if planner is not None else make_planner(spec, seed=config.seed)
     if drives_itself(planner):
         return findings            # the world's own IDM/MOBIL ego: no plans to check
     scenes = []
@@ -166,7 +169,7 @@ def check_planner(spec: str, config: CheckConfig = CheckConfig(), progress: bool
         for episode in range(config.episodes):
             checking = _Checking(planner, findings, env_id)
             drive_episode(cached_env(env_id), checking, drive, episode)
-            scenes.extend(checking.scenes[1:2])    # one scene per episode for determinism
+            scenes.extend((env_id, scene) for scene in checking.scenes[1:2])   # one per episode
             if progress:
                 print(f"  {env_id} episode {episode}: {findings.plans} plans checked so far",
                       flush=True)

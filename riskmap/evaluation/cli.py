@@ -59,12 +59,14 @@ def _cmd_check_planner(args: argparse.Namespace) -> int:
     import numpy as np
 
     from riskmap.evaluation.check_planner import CheckConfig, check_planner
+    from riskmap.registry import make_planner
 
     config = CheckConfig(envs=args.envs, episodes=args.episodes, episode_s=args.seconds,
                          seed=args.seed)
+    planner = make_planner(args.spec, seed=args.seed)     # a bad SPEC: one line, before anything
     print(f"checking {args.spec} on {', '.join(config.envs)} ({config.episodes} episode(s) of "
           f"{config.episode_s:g} s each)", flush=True)
-    findings = check_planner(args.spec, config, progress=not args.quiet)
+    findings = check_planner(args.spec, config, progress=not args.quiet, planner=planner)
     if findings.times_s:
         times = 1000 * np.asarray(findings.times_s)
         print(f"{findings.plans} plans; {np.median(times):.1f} ms median, {times.max():.1f} ms "

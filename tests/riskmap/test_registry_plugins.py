@@ -9,9 +9,9 @@ from tests.broken_planners import Broken
 
 def test_py_spec_makes_the_planner_with_typed_keys_and_the_seed():
     planner = make_planner("py:tests.broken_planners:Broken?fault=kmh", seed=7)
-    assert isinstance(planner, Broken) and planner.fault == "kmh" and planner.seed == 7
+    assert isinstance(planner, Broken) and planner.faults == {"kmh"} and planner.seed == 7
     explicit = make_planner("py:tests.broken_planners:Broken?seed=3", seed=7)
-    assert explicit.seed == 3 and explicit.fault == "none"
+    assert explicit.seed == 3 and explicit.faults == {"none"}
     assert make_planner("py:riskmap.planner.baselines:ConstantVelocityPlanner").__class__.__name__ \
         == "ConstantVelocityPlanner"      # a factory without a seed gets none
 
