@@ -10,7 +10,7 @@ STAMP  := $(VENV)/.installed
 TORCH_PIN := torch==2.14.1 torchvision==0.29.1
 DEMO_OUT  ?= out/demo
 
-.PHONY: setup test test-faults demo bench clean
+.PHONY: setup test test-faults test-cluster demo bench clean
 
 setup: $(STAMP)
 
@@ -30,6 +30,11 @@ test: $(STAMP)
 # at its last one too (make test kills each halfway only).
 test-faults: $(STAMP)
 	$(BIN)/python -m pytest -q -m faults tests/reliability
+
+# A two-node Ray cluster on this machine; the second node is killed mid-campaign (-rP: the log
+# lines naming the lost node and the retried jobs are printed).
+test-cluster: $(STAMP)
+	$(BIN)/python -m pytest -q -rP -m cluster tests/adversary/campaign/test_ray_cluster.py
 
 demo: $(STAMP)
 	$(BIN)/riskmap collect --env highway-v0 --episodes 2 --seed 2000 --out $(DEMO_OUT)/data/highway --workers 2 --resume

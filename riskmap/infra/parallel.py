@@ -8,19 +8,23 @@ picklable top-level function; results must not depend on which worker ran an ite
 - `local`, several: a `spawn` process pool. spawn, not fork: the parent may hold torch/OpenMP
   threads that a fork would copy half-made. A pool worker that dies breaks the whole pool
   (concurrent.futures' design): the error propagates and `--resume` continues.
-- `ray`: Ray tasks on a cluster (`address`) or a local Ray instance. A worker that dies under an
-  item fails only that item: `on_lost(item, error)` turns it into a result (without it, the
-  error propagates).
+- `ray`: Ray tasks on a cluster (`address`) or a local Ray instance. An item whose worker or
+  node dies under it is submitted again (up to `RAY_ATTEMPTS` times in all; each loss and retry
+  is logged on stderr, as is a node that leaves the cluster); its result is yielded once, when an
+  attempt finishes. An item that fails every attempt, or whose function raised, fails alone:
+  `on_lost(item, error)` turns it into a result (without it, the error propagates).
 """
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
 from rasterize.errors import InputError
 
 BACKENDS = ("local", "ray")
+RAY_ATTEMPTS = 3      # tries per item when its Ray worker or node dies under it
 
 
 def run_parallel(fn: Callable[[Any], Any], items: Iterable, workers: int = 1, backend: str = "local",
@@ -81,20 +85,47 @@ def init_ray(workers: int, address: str | None) -> bool:
     return True
 
 
+def _log(message: str) -> None:
+    print(f"ray: {message}", file=sys.stderr, flush=True)
+
+
+def _alive_nodes(ray) -> dict[str, str]:
+    return {node["NodeID"]: node.get("NodeManagerAddress", "?") for node in ray.nodes()
+            if node.get("Alive")}
+
+
 def _run_ray(fn, items: list, workers: int, address: str | None, on_lost) -> Iterator[tuple[Any, Any]]:
     started_here = init_ray(workers, address)
     import ray
 
-    remote = ray.remote(num_cpus=1)(fn)
-    pending = {remote.remote(item): item for item in items}
+    # Ray's own retries are off: this loop retries, so that every loss is logged and counted.
+    remote = ray.remote(num_cpus=1, max_retries=0)(fn)
+    pending = {remote.remote(item): (item, 1) for item in items}
+    nodes = _alive_nodes(ray)
     try:
         while pending:
-            done, _ = ray.wait(list(pending), num_returns=1)
+            done, _ = ray.wait(list(pending), num_returns=1, timeout=1.0)
+            now = _alive_nodes(ray)
+            for node in nodes.keys() - now.keys():
+                _log(f"node {node[:12]} at {nodes[node]} lost; {len(now)} node(s) left, "
+                     "its running items are retried")
+            nodes = now
             for ref in done:
-                item = pending.pop(ref)
+                item, attempt = pending.pop(ref)
                 try:
                     result = ray.get(ref)
-                except ray.exceptions.RayError as error:
+                except ray.exceptions.RayTaskError as error:      # the function itself raised
+                    if on_lost is None:
+                        raise
+                    result = on_lost(item, error)
+                except ray.exceptions.RayError as error:          # its worker or node died
+                    if attempt < RAY_ATTEMPTS:
+                        why = " ".join(str(error).split())[:160]
+                        _log(f"item {_name(item)} lost ({type(error).__name__}: {why}); "
+                             f"retrying, attempt {attempt + 1} of {RAY_ATTEMPTS}")
+                        pending[remote.remote(item)] = (item, attempt + 1)
+                        continue
+                    _log(f"item {_name(item)} lost {RAY_ATTEMPTS} times; recorded as failed")
                     if on_lost is None:
                         raise
                     result = on_lost(item, error)
@@ -104,3 +135,8 @@ def _run_ray(fn, items: list, workers: int, address: str | None, on_lost) -> Ite
             ray.cancel(ref)
         if started_here:
             ray.shutdown()
+
+
+def _name(item) -> str:
+    """How a log line names an item: its `job_id` where it has one."""
+    return str(getattr(item, "job_id", item))[:80]
