@@ -164,6 +164,17 @@ def _visible(colrow: np.ndarray, config: RasterConfig) -> bool:
     return bool(_inside(colrow, config).any())
 
 
+def _on_raster(boxes: np.ndarray, config: RasterConfig) -> np.ndarray:
+    """Mask [...] of the boxes [..., 4, 2] (pixel space) whose bounding boxes reach the raster.
+
+    By bounding box, not by corner: a box can cover pixels with every corner off the raster (a
+    lorry across a corner of it). False for boxes with NaN corners.
+    """
+    lo, hi = boxes.min(axis=-2), boxes.max(axis=-2)
+    return (hi[..., 0] > -1) & (lo[..., 0] < config.cols + 1) \
+        & (hi[..., 1] > -1) & (lo[..., 1] < config.rows + 1)
+
+
 def _draw_lane(layers: np.ndarray, lane: Lane, origin: np.ndarray, heading: float,
                config: RasterConfig) -> None:
     # One transform per polyline; everything below works in pixel coordinates.
@@ -250,10 +261,12 @@ def _draw_agents_future(canvas: np.ndarray, scene: Scene, origin: np.ndarray, he
     xy, fwd, sizes = xy[others], fwd[others], scene.sizes[others]
     corners = _box_corners(xy, fwd, np.broadcast_to(sizes[:, None], xy.shape))   # [M, K, 4, 2]
     boxes = _shrink_boxes(pixel_from_ego(ego_from_world(corners, origin, heading), config))
-    shown = _inside(boxes.reshape(-1, 2), config).reshape(boxes.shape[:3]).any(axis=-1)
+    shown = _on_raster(boxes, config)
     values = future_intensity(prediction_times(config.predict_s, PREDICT_STEP_S),
                               config.predict_s)
-    vertices = _cv_points(boxes)                 # all at once: this runs per training window
+    # All at once (this runs per training window); boxes not drawn become 0 so that far ones
+    # do not overflow the int32 cast.
+    vertices = _cv_points(np.where(shown[..., None, None], boxes, 0.0))
     # Latest first: the nearer, brighter boxes are painted over the dimmer ones, so each pixel
     # keeps the brightest (soonest) box that covers it.
     for k in range(xy.shape[1] - 1, -1, -1):
@@ -274,7 +287,7 @@ def _draw_signals(canvas: np.ndarray, scene: Scene, origin: np.ndarray, heading:
                                                                           1e-12)
         corners = np.stack([b + normal, b - normal, a - normal, a + normal])
         px = pixel_from_ego(ego_from_world(corners, origin, heading), config)
-        if _visible(px, config):
+        if _on_raster(px, config):
             _fill(canvas, _shrink_box(px), value)
 
 
@@ -295,9 +308,7 @@ def rasterize_scene(scene: Scene, config: RasterConfig) -> np.ndarray:
     # Every box of the window shrunk and turned into OpenCV vertices at once; only the fills
     # run per box. Boxes wholly off the raster are skipped (OpenCV would clip them to nothing).
     boxes = _shrink_boxes(_boxes_px(scene, origin, heading, config)[:, oldest:now + 1])
-    lo, hi = boxes.min(axis=2), boxes.max(axis=2)                 # [N, T, 2] (col, row)
-    on_raster = scene.valid[:, oldest:now + 1] & (hi[..., 0] > -1) & (lo[..., 0] < config.cols + 1) \
-        & (hi[..., 1] > -1) & (lo[..., 1] < config.rows + 1)     # False for NaN states too
+    on_raster = scene.valid[:, oldest:now + 1] & _on_raster(boxes, config)   # [N, T]
     vertices = _cv_points(np.where(on_raster[..., None, None], boxes, 0.0))   # [N, T, 4, 2]
     for step in range(oldest, now + 1):  # oldest first: newer, brighter boxes overwrite
         age = (now - step) * scene.dt

@@ -8,7 +8,10 @@ Shapes: reward, goal, value [B, H, W]; policy [B, 5, H, W] over ACTIONS; start_c
 
 Moves off the grid do not exist. −∞ is represented by a large finite negative (`neg_value`) so
 that no arithmetic ever makes NaN; values are clamped into [neg, −neg] so that sums of huge
-rewards cannot overflow to ±inf either.
+rewards cannot overflow to ±inf either. The policy is a softmax normalised by its own sum, not
+exp(Q − V): at large |V| the few units of logsumexp above the max vanish in V's rounding, and the
+rows would sum to up to 5. Off-grid moves get exactly 0 even where clamping ties the real
+options with the stand-in (inputs at ±1e30 and beyond).
 
 Two kernels compute the same recursions. On the CPU (the planner's case) a numpy kernel uses that
 every Q of a cell shares its reward, V(s) = r(s) + logsumexp(γ V(neighbours), γ g(s)), with
@@ -93,10 +96,18 @@ def _value_iteration_numpy(reward: np.ndarray, goal: np.ndarray, horizon: int, g
         np.add(total, reward, out=value)
         if clamp:
             np.clip(value, neg, -neg, out=value)
-    # π(a | s) = exp(Q(s, a) − V(s)) = exp(option_a − logsumexp): the shared reward cancels. The
-    # slots still hold the last backup's options.
-    np.subtract(options, total[:, None], out=work)
-    return value, np.exp(work, out=work)
+    # π(a | s) ∝ exp(option_a − max), the last backup's, still in `work` (the shared reward
+    # cancels), with the moves off the grid struck out.
+    _strike_off_grid(work)
+    return value, np.divide(work, work.sum(axis=1, keepdims=True), out=work)
+
+
+def _strike_off_grid(policy) -> None:
+    """Zero the moves [B, 5, H, W] that would leave the grid, in place."""
+    policy[:, UP, 0, :] = 0.0
+    policy[:, DOWN, -1, :] = 0.0
+    policy[:, LEFT, :, 0] = 0.0
+    policy[:, RIGHT, :, -1] = 0.0
 
 
 def _value_iteration_torch(reward: torch.Tensor, goal: torch.Tensor, horizon: int,
@@ -106,7 +117,7 @@ def _value_iteration_torch(reward: torch.Tensor, goal: torch.Tensor, horizon: in
     in place, without per-step allocations.
     """
     neg = neg_value(reward.dtype)
-    b, h, w = reward.shape
+    _, h, w = reward.shape
     q = (reward + gamma * neg).clamp(neg, -neg).unsqueeze(1).repeat(1, 5, 1, 1)
     q[:, END] = (reward + gamma * goal).clamp(neg, -neg)
     # (Q view, reward view, source slice of V) of each move whose target is inside the grid.
@@ -126,8 +137,9 @@ def _value_iteration_torch(reward: torch.Tensor, goal: torch.Tensor, horizon: in
                 torch.add(r_view, value[source], alpha=gamma, out=q_view)
         moves.clamp_(neg, -neg)
         value = torch.logsumexp(q, dim=1)
-    policy = torch.exp(q - value.unsqueeze(1))
-    return value, policy
+    on_grid = torch.ones((1, len(ACTIONS), h, w), dtype=torch.bool, device=q.device)
+    _strike_off_grid(on_grid)
+    return value, torch.softmax(q.masked_fill(~on_grid, float("-inf")), dim=1)
 
 
 def state_visitation(policy: torch.Tensor, start_cells: torch.Tensor, horizon: int
