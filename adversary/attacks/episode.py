@@ -26,11 +26,13 @@ def attack_seed(job) -> int:
 
 
 class RecordingPlanner:
-    """Passes plans through and keeps the last (scene, plan) for the report's gallery."""
+    """Passes plans through and keeps, for the report, the last (scene, plan) and the risk map
+    of every plan (with its scene's time), for planners that make one."""
 
     def __init__(self, planner):
         self.inner = planner
         self.last = None
+        self.risk_maps: list[tuple[float, np.ndarray]] = []
 
     @property
     def raster(self):
@@ -38,22 +40,29 @@ class RecordingPlanner:
 
     def reset(self, scene) -> None:
         self.last = None
+        self.risk_maps = []
         self.inner.reset(scene)
 
     def plan(self, scene):
         plan = self.inner.plan(scene)
         self.last = (scene, plan)
+        if getattr(plan, "risk_map", None) is not None:
+            self.risk_maps.append((float(scene.time_s), np.asarray(plan.risk_map, np.float16)))
         return plan
 
 
 def artifact_of(monitor: EpisodeMonitor, recording: RecordingPlanner | None, env_id: str) -> bytes:
-    """npz bytes: the final scene with 8 s of history, the last planning scene and its plan."""
+    """npz bytes: the final scene with 8 s of history at the recording's rate (every recorded
+    step: the report's frames and animation), the last planning scene and its plan, and the risk
+    map of every plan (`plans__time_s` [P], `plans__risk_map` [P, G, G] float16) where the
+    planner makes one. Stores written before the frames were kept hold the final scene at 0.5 s
+    steps and no `plans__` arrays; the report reads both."""
     from rasterize.frames import world_from_highway_env
     from rasterize.scene_io import pack_scenes
 
     run = monitor.run
     final = run.recorder.scene(run.recorder.num_steps - 1, history_s=8.0, future_s=0.0,
-                               source=env_id)
+                               dt_s=run.recorder.dt_s, source=env_id)
     arrays = {f"final__{k}": v for k, v in pack_scenes([final]).items()}
     adversary = monitor.attack.adversary
     index = -1
@@ -70,6 +79,9 @@ def artifact_of(monitor: EpisodeMonitor, recording: RecordingPlanner | None, env
         for name in ("risk_map", "svf"):
             if getattr(plan, name) is not None:
                 arrays[f"plan__{name}"] = np.asarray(getattr(plan, name), np.float32)
+    if recording is not None and recording.risk_maps:
+        arrays["plans__time_s"] = np.array([t for t, _ in recording.risk_maps], np.float32)
+        arrays["plans__risk_map"] = np.stack([m for _, m in recording.risk_maps])
     buffer = io.BytesIO()
     np.savez_compressed(buffer, **arrays)
     return buffer.getvalue()

@@ -64,6 +64,60 @@ def metrics_figure(rows: list[dict], path: Path) -> str:
     return _save(fig, path)
 
 
+def headline_figure(rows: list[dict], attack_order: list[str], path: Path) -> str:
+    """The report's first figure: collision rate per planner and attack, one panel per scenario
+    family (numbers.py's by-family rows), bars with their 95% Wilson intervals and k/n above."""
+    from matplotlib.patches import Patch
+
+    plt = _plt()
+    rows = [r for r in rows if r["collision_rate"] is not None]
+    families = sorted({r["family"] for r in rows})
+    planners = sorted({r["planner"] for r in rows})
+    colour = {p: plt.get_cmap("tab10")(j % 10) for j, p in enumerate(planners)}
+    by_key = {(r["family"], r["planner"], r["attack"]): r["collision_rate"] for r in rows}
+    order = [a for a in attack_order if any(r["attack"] == a for r in rows)]
+    order += sorted({r["attack"] for r in rows} - set(order))
+    attacks_of = {f: [a for a in order if any((f, p, a) in by_key for p in planners)] for f in families}
+    planners_of = {f: [p for p in planners if any((f, p, a) in by_key for a in order)] for f in families}
+    slots = [len(attacks_of[f]) * (len(planners_of[f]) + 0.8) for f in families]
+    width_in = min(12.4, max(7.5, 3.5 + 0.5 * sum(slots)))
+    # Attack names turned when the longest is wider than its group in the narrowest panel.
+    group_in = min(0.8 * width_in * slot / sum(slots) / len(attacks_of[f]) for f, slot in zip(families, slots))
+    turn = 0.07 * max(len(a) for a in order) > 0.95 * group_in      # about 0.07 in a character
+    fig, axes = plt.subplots(1, len(families), figsize=(width_in, 3.8), dpi=100, squeeze=False,
+                             gridspec_kw={"width_ratios": slots})
+    for ax, family in zip(axes[0], families):
+        here = planners_of[family]
+        width = 0.8 / len(here)
+        for i, attack in enumerate(attacks_of[family]):
+            for j, planner in enumerate(here):
+                stat = by_key.get((family, planner, attack))
+                if stat is None:
+                    continue
+                x = i + (j - (len(here) - 1) / 2) * width
+                v, lo, hi = 100 * stat["value"], 100 * stat["lo"], 100 * stat["hi"]
+                ax.bar(x, v, width * 0.9, color=colour[planner], edgecolor=colour[planner], linewidth=1.5)
+                ax.errorbar(x, v, yerr=[[v - lo], [hi - v]], fmt="none", ecolor="#333", capsize=3, lw=1)
+                ax.text(x, hi + 1.5, f"{stat['k']}/{stat['n']}", ha="center", va="bottom", fontsize=7)
+        labels = attacks_of[family]
+        ax.set_xticks(range(len(labels)), labels, fontsize=8, rotation=15 if turn else 0,
+                      ha="right" if turn else "center")
+        ax.set_xlim(-0.6, len(labels) - 0.4)
+        ax.set_ylim(0, 112)
+        ax.set_yticks([0, 25, 50, 75, 100])
+        jobs = sum(by_key[family, p, a]["n"] for p in here for a in labels if (family, p, a) in by_key)
+        ax.set_title(f"{family} ({jobs} jobs)", fontsize=10)
+        ax.grid(axis="y", alpha=0.3)
+    axes[0][0].set_ylabel("collision rate (%)")
+    names = [short_spec(p) for p in planners]
+    legend_in = 0.7 + 0.058 * max(len(name) for name in names)     # about 0.058 in a character
+    fig.legend([Patch(color=colour[p]) for p in planners], names, loc="center right", fontsize=8,
+               frameon=False, title="planner", title_fontsize=8)
+    fig.suptitle("collision rate per planner and attack (bars: 95% Wilson intervals; k/n jobs above)",
+                 fontsize=10.5)
+    return _save(fig, path, rect=(0, 0, 1 - legend_in / width_in, 0.97))
+
+
 def collision_types_figure(rows: list[dict], path: Path) -> str:
     plt = _plt()
     labels = [f"{short_spec(r['planner'])}\n{r['attack']}" for r in rows]

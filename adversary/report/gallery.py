@@ -1,35 +1,21 @@
-"""Figures of the worst scenes: BEV | risk map | SVF | trajectories, and a frame strip.
+"""The panel of a worst scene: BEV | risk map | SVF | trajectories (matplotlib).
 
-Drawn from the npz artifact each job leaves (adversary.campaign.job): the scene of the last plan and the
-plan's maps, and the final scene with 8 s of history (0.5 s steps).
+Drawn from the npz artifact each job leaves (adversary.report.frames.load_artifact): the scene of
+the last plan and the plan's maps, and the final scene with its history. A crash attack's
+artifact holds its own panel (adversary.crash.panel), which is used as it is. The frame strip,
+the risk map over time and the animation of every job are adversary.report.frames'.
 """
 
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
+from adversary.report.frames import load_artifact, scene_at
 from rasterize.config import raster_config_for_env
 from rasterize.raster import rasterize_scene
-from rasterize.scene_io import unpack_scene
 from riskmap.figures.panels import raster_to_rgb
-
-STRIP_SECONDS_BEFORE_END = (3.0, 2.0, 1.0, 0.0)
-
-
-def _load(path: Path) -> dict:
-    with np.load(path) as data:
-        arrays = {k: data[k] for k in data.files}
-    out = {"final": unpack_scene({k[len("final__"):]: v for k, v in arrays.items()
-                                  if k.startswith("final__")}, 0),
-           "adversary_index": int(arrays["adversary_index"])}
-    if "plan_scene__states" in arrays:
-        out["plan_scene"] = unpack_scene({k[len("plan_scene__"):]: v for k, v in arrays.items()
-                                          if k.startswith("plan_scene__")}, 0)
-        out["plan"] = {k[len("plan__"):]: v for k, v in arrays.items() if k.startswith("plan__")}
-    return out
 
 
 def _bev(ax, scene, raster, title: str) -> None:
@@ -83,27 +69,28 @@ def _trajectories(ax, scene, adversary: int) -> None:
     ax.set_xlabel("world x (m)", fontsize=8)
 
 
-def gallery_figures(artifact: Path, env_id: str, out_dir: Path, stem: str, title: str
-                    ) -> tuple[str, str | None]:
-    """(panel PNG name, strip PNG name) written into out_dir for one job's artifact; a crash
-    attack's artifact holds its own panel (adversary.crash.panel) and no strip."""
-    with np.load(artifact) as data:
-        if "crash_panel_png" in data.files:
-            panel = out_dir / f"{stem}_panels.png"
-            panel.write_bytes(data["crash_panel_png"].tobytes())
-            return panel.name, None
+def gallery_panel(artifact: Path, env_id: str, out_dir: Path, stem: str, title: str) -> str | None:
+    """The panel PNG's name, written into out_dir for one job's artifact; None when the artifact
+    holds neither a scene nor an attack's own panel."""
+    data = load_artifact(artifact)
+    panel = out_dir / f"{stem}_panels.png"
+    if data.crash_panel_png is not None:
+        panel.write_bytes(data.crash_panel_png)
+        return panel.name
+    if data.final is None:
+        return None
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    data = _load(artifact)
     raster = raster_config_for_env(env_id, 160, 160)
-    final = data["final"]
+    final = data.final
     fig, axes = plt.subplots(1, 4, figsize=(17, 4.3), dpi=90)
-    plan = data.get("plan", {})
-    scene = data.get("plan_scene", final)
-    when = "at the last plan" if "plan_scene" in data else "at the end (no plans: the ego drove itself)"
+    plan = data.plan
+    scene = (data.plan_scene if data.plan_scene is not None
+             else scene_at(final, final.current_index, raster.history_s))
+    when = "at the last plan" if data.plan_scene is not None else "at the end (no plans: the ego drove itself)"
     _bev(axes[0], scene, raster, f"BEV {when}, t = {scene.time_s:.1f} s")
     if "waypoints" in plan:
         wp = np.concatenate([[[0.0, 0.0]], plan["waypoints"]])
@@ -113,25 +100,9 @@ def gallery_figures(artifact: Path, env_id: str, out_dir: Path, stem: str, title
     svf = plan.get("svf")
     _map(axes[2], fig, None if svf is None else np.log10(np.maximum(svf, 1e-4)),
          "SVF (log10 expected visits)", "inferno")
-    _trajectories(axes[3], final, data["adversary_index"])
+    _trajectories(axes[3], final, data.adversary_index)
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    panel = out_dir / f"{stem}_panels.png"
     fig.savefig(panel)
     plt.close(fig)
-
-    fig, axes = plt.subplots(1, len(STRIP_SECONDS_BEFORE_END), figsize=(12, 3.9), dpi=80)
-    for ax, before in zip(axes, STRIP_SECONDS_BEFORE_END):
-        index = final.current_index - round(before / final.dt)
-        if index < 0 or not final.valid[final.ego_index, index]:
-            ax.axis("off")
-            ax.set_title(f"t_end - {before:.0f} s: not recorded", fontsize=9)
-            continue
-        frame = replace(final, current_index=index, time_s=final.time_s - before)
-        _bev(ax, frame.past(), raster, f"t = {frame.time_s:.1f} s")
-    fig.suptitle("last seconds of the episode (ego red, others blue)", fontsize=10)
-    fig.tight_layout()
-    strip = out_dir / f"{stem}_strip.png"
-    fig.savefig(strip)
-    plt.close(fig)
-    return panel.name, strip.name
+    return panel.name

@@ -1,8 +1,13 @@
-"""`adversary report DIR`: report.html (Jinja2) + PNG figures + report.json from a campaign.
+"""`adversary report DIR`: report.html (Jinja2) + PNG figures + report.json from a campaign,
+and a page per job (jobs/JOB_ID.html, its pictures under jobs/media/).
+
+The page opens with a summary paragraph written from the numbers (adversary.report.summary) and
+the collision rate per planner and attack with its intervals (figures.headline_figure); the
+tables follow. The worst scenes that collided are animated (GIF, adversary.report.frames).
 
 report.json holds every number on the page: "results" (a function of the records alone, so a
 resumed or distributed campaign gives the same), "timing" (machine-dependent), the config,
-versions and provenance.
+versions and provenance, and "pages" (each job's page).
 """
 
 from __future__ import annotations
@@ -14,14 +19,17 @@ from pathlib import Path
 
 from adversary.attacks.registry import attack_entry
 from adversary.campaign.store import ResultStore
-from adversary.report.figures import collision_types_figure, metrics_figure, search_figure, short_spec
+from adversary.report.figures import collision_types_figure, headline_figure, metrics_figure, search_figure
+from adversary.report.jobs import job_media, job_page, job_title, outcome
 from adversary.report.numbers import COLLISION_TYPES, report_numbers
+from adversary.report.summary import summary_paragraph
 from rasterize.errors import InputError
 from riskmap.infra.atomic import atomic_write, write_json
 from riskmap.infra.provenance import provenance
+from riskmap.sim.record import current_names
 
 _PACKAGES = ("riskmap-toolkit", "numpy", "torch", "highway-env", "gymnasium", "scipy", "matplotlib",
-             "jinja2", "pyyaml", "ray")
+             "jinja2", "pyyaml", "imageio", "pillow", "ray")
 
 
 def versions() -> dict:
@@ -57,18 +65,6 @@ def _environment():
     return env
 
 
-def _outcome(worst: dict) -> str:
-    """A worst scene's outcome in a few words (a crash attack measures no Safety %, and its
-    collisions with other vehicles than the adversary have no type or kinematic value)."""
-    if worst["collided"]:
-        if worst["kinematic_mps"] is None:
-            return "collision (not with the adversary)"
-        return f"collision ({worst['collision_type']}, {worst['kinematic_mps']:.1f} m/s)"
-    if worst["safety_pct"] is None:
-        return "no collision"
-    return f"no collision, Safety {worst['safety_pct']:.0f}%"
-
-
 def make_report(campaign_dir: Path, out_dir: Path | None = None) -> dict:
     """Write report.html, report.json and the PNGs into out_dir (default: the campaign dir)."""
     campaign_dir = Path(campaign_dir)
@@ -78,37 +74,61 @@ def make_report(campaign_dir: Path, out_dir: Path | None = None) -> dict:
                          "`adversary stress-test --out`")
     out_dir = Path(out_dir or campaign_dir)
     figures = out_dir / "figures"
-    figures.mkdir(parents=True, exist_ok=True)
-    meta = json.loads(meta_path.read_text())
+    try:
+        meta = json.loads(meta_path.read_text())
+        if not {"jobs", "config"} <= set(meta) or "report" not in meta["config"]:
+            raise ValueError("not a campaign.json")
+    except (ValueError, TypeError):
+        raise InputError(f"{meta_path} is damaged (not a campaign.json of `adversary stress-test`); "
+                         "run the campaign again into a new --out") from None
+    for path in sorted((campaign_dir / "records").glob("*.json")):
+        try:
+            if "job_id" not in json.loads(path.read_text()):
+                raise ValueError("not a job record")
+        except (ValueError, TypeError):
+            raise InputError(f"record {path} is damaged; delete it and run `adversary stress-test "
+                             f"--resume --out {campaign_dir}` to run that job again") from None
     store = ResultStore(campaign_dir)
     records = [r for r in store.records() if r["job_id"] in set(meta["jobs"])]
     store.close()
     if not records:
         raise InputError(f"{campaign_dir}: no finished jobs yet; run `adversary stress-test` first")
     gallery_count = meta["config"]["report"]["gallery"]
+    figures.mkdir(parents=True, exist_ok=True)
     results, timing = report_numbers(records, gallery_count)
+    attacks = {a["label"] or a["name"]: a["name"] for a in meta["config"]["attacks"]}
+    categories = {label: attack_entry(name).category for label, name in attacks.items()}
+    categories.update({r["attack"]: r["attack_category"] for r in records if "attack_category" in r})
+    results["summary"] = summary_paragraph(results["by_family"], categories, results["failed"])
 
-    images = {"metrics": "figures/" + metrics_figure(results["comparison"], figures / "metrics.png"),
+    images = {"headline": "figures/" + headline_figure(results["by_family"], list(attacks),
+                                                        figures / "headline.png"),
+              "metrics": "figures/" + metrics_figure(results["comparison"], figures / "metrics.png"),
               "collision_types": None, "search": None}
     if any(r["total"] for r in results["collision_types"]):
         images["collision_types"] = "figures/" + collision_types_figure(
             results["collision_types"], figures / "collision_types.png")
     if results["search_history"]:
         images["search"] = "figures/" + search_figure(results["search_history"], figures / "search.png")
-    from adversary.report.gallery import gallery_figures
+    from adversary.report.gallery import gallery_panel
 
+    # The worst scenes that collided are animated (their pages and the gallery show the GIF).
+    animate = {w["job_id"] for w in results["worst"] if w["collided"]}
+    media = {r["job_id"]: job_media(campaign_dir / "artifacts" / f"{r['job_id']}.npz", current_names(r),
+                                    out_dir, r["job_id"] in animate) for r in records}
     gallery = []
     for rank, worst in enumerate(results["worst"]):
         artifact = campaign_dir / "artifacts" / f"{worst['job_id']}.npz"
-        if not artifact.is_file():
+        if not artifact.is_file() or media[worst["job_id"]].get("unreadable"):
             continue
-        title = (f"#{rank + 1} {short_spec(worst['planner'])} | {worst['env_id']} seed {worst['scene_seed']} "
-                 f"episode {worst['episode']} | {worst['attack']}: {_outcome(worst)}")
-        panel, strip = gallery_figures(artifact, worst["env_id"], figures, f"worst_{rank + 1}", title)
-        gallery.append({**worst, "title": title, "panel": f"figures/{panel}", "strip": strip and f"figures/{strip}"})
-    results["gallery_images"] = [{"job_id": g["job_id"], "panel": g["panel"], "strip": g["strip"]}
+        title = f"#{rank + 1} {job_title(worst)}: {outcome(worst)}"
+        panel = gallery_panel(artifact, worst["env_id"], figures, f"worst_{rank + 1}", title)
+        m = media[worst["job_id"]]
+        gallery.append({**worst, "title": title, "panel": panel and f"figures/{panel}",
+                        "page": job_page(worst["job_id"]),
+                        **{k: m[k] and f"jobs/{m[k]}" for k in ("strip", "gif")}})
+    results["gallery_images"] = [{k: g[k] for k in ("job_id", "panel", "strip", "gif", "page")}
                                  for g in gallery]
-    attacks = {a["label"] or a["name"]: a["name"] for a in meta["config"]["attacks"]}
     attack_notes = [{"label": label, "name": name, "category": attack_entry(name).category,
                      "summary": attack_entry(name).summary} for label, name in attacks.items()]
     report = {
@@ -119,9 +139,34 @@ def make_report(campaign_dir: Path, out_dir: Path | None = None) -> dict:
         "campaign_provenance": {k: meta.get(k) for k in ("package_version", "git_commit")},
         "report_provenance": provenance(), "versions": versions(),
     }
+    jobs = [{"job_id": r["job_id"], "page": job_page(r["job_id"]), "planner": r["planner"],
+             "env_id": r["env_id"], "scene_seed": r["scene_seed"], "episode": r["episode"],
+             "attack": r["attack"], "status": r["status"], "outcome": outcome(current_names(r)),
+             "animated": bool(media[r["job_id"]]["gif"])} for r in records]
+    report["pages"] = {j["job_id"]: j["page"] for j in jobs}
     write_json(out_dir / "report.json", report)
-    html = _environment().get_template("report.html.j2").render(
-        r=report, gallery=gallery, attack_notes=attack_notes, collision_types=COLLISION_TYPES,
+    env = _environment()
+    _write_job_pages(env, out_dir, records, media, {g["job_id"]: g for g in gallery}, gallery_count)
+    html = env.get_template("report.html.j2").render(
+        r=report, gallery=gallery, jobs=jobs, attack_notes=attack_notes, collision_types=COLLISION_TYPES,
         config_json=json.dumps(meta["config"], indent=2))
     atomic_write(out_dir / "report.html", lambda f: f.write(html.encode()))
     return report
+
+
+def _write_job_pages(env, out_dir: Path, records: list[dict], media: dict, gallery: dict,
+                     gallery_count: int) -> None:
+    """OUT/jobs/JOB_ID.html for every job: its pictures and its record as stored."""
+    template = env.get_template("job.html.j2")
+    (out_dir / "jobs").mkdir(parents=True, exist_ok=True)
+    for record in records:
+        job_id = record["job_id"]
+        entry = gallery.get(job_id)
+        if media[job_id]["attack_panel"]:
+            entry = entry and {**entry, "panel": None}     # the gallery's panel is the attack's own
+        html = template.render(
+            record=record, title=job_title(record), outcome=outcome(current_names(record)),
+            media=media[job_id], panel=entry and entry["panel"] and f"../{entry['panel']}",
+            rank=entry and entry["title"].split(" ", 1)[0], gallery_count=gallery_count,
+            record_json=json.dumps(record, indent=2, sort_keys=True))
+        atomic_write(out_dir / job_page(job_id), lambda f, html=html: f.write(html.encode()))
