@@ -29,7 +29,6 @@ without a collision, as in CRASH's own tables, and the report shows how many the
 
 from __future__ import annotations
 
-import io
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,12 +36,13 @@ from pathlib import Path
 import numpy as np
 
 from adversary.attacks.base import AttackEntry
-from adversary.attacks.episode import attack_seed, job_fields
+from adversary.attacks.episode import RecordingPlanner, attack_seed, job_fields, npz_bytes, scene_arrays
 from rasterize.config import family_of_env
 from rasterize.errors import InputError
 from riskmap.infra.config_mapping import require
 from riskmap.registry import cached_planner
 from riskmap.sim.metrics import coarse_collision_name
+from riskmap.sim.plan import drives_itself
 from riskmap.sim.record import EpisodeRecord, current_names
 
 # CRASH's SELECTORS (adversary.crash.selection), spelt out so that reading a config does not
@@ -175,13 +175,15 @@ def crash_record(result: dict, scene_s: float) -> dict:
         "timing": {**timing, "generation_seconds": result["generation"]["batch_seconds"]}})
 
 
-def _panel_artifact(panel: Path) -> bytes | None:
-    """npz bytes holding the attack's panel PNG (adversary.crash.panel) for the report's gallery."""
-    if not panel.is_file():
-        return None
-    buffer = io.BytesIO()
-    np.savez_compressed(buffer, crash_panel_png=np.frombuffer(panel.read_bytes(), dtype=np.uint8))
-    return buffer.getvalue()
+def _artifact(result: dict, panel: Path, recording: RecordingPlanner | None) -> bytes | None:
+    """npz bytes for the report: the attack's panel PNG (adversary.crash.panel) and, for an
+    attacked scene, the final drive as the episode attacks store theirs (frames, risk maps)."""
+    arrays = {}
+    if panel.is_file():
+        arrays["crash_panel_png"] = np.frombuffer(panel.read_bytes(), dtype=np.uint8)
+    if result.get("final_scene") is not None:
+        arrays.update(scene_arrays(result["final_scene"], result.get("adversary_xy"), recording))
+    return npz_bytes(arrays) if arrays else None
 
 
 def crash_job(job) -> tuple[dict, bytes | None]:
@@ -196,15 +198,17 @@ def crash_job(job) -> tuple[dict, bytes | None]:
     except InputError as error:
         return _not_attacked(str(error), {"selector": params.selector}), None
     planner = cached_planner(job.planner, job.planner_seed)
+    # The last rollout of an attack is its final drive: the recording keeps that drive's plans.
+    recording = None if drives_itself(planner) else RecordingPlanner(planner)
     traffic, selector = params.paths(job.env_id)
     models = _models(traffic, selector)
     # The same seed as the episode attacks': only the random selector draws.
     seed = attack_seed(job)
     with tempfile.TemporaryDirectory() as tmp:
         panel = Path(tmp) / "panel.png"
-        [result] = attack_records([record], models, planner, job.planner, params.attack_config(), [seed],
-                                  [panel])
-        artifact = _panel_artifact(panel)
+        [result] = attack_records([record], models, recording or planner, job.planner,
+                                  params.attack_config(), [seed], [panel], keep_scenes=True)
+        artifact = _artifact(result, panel, recording)
     return crash_record(result, scene.t0_s + scene.horizon_s), artifact
 
 

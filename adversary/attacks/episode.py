@@ -34,6 +34,13 @@ class RecordingPlanner:
         self.last = None
         self.risk_maps: list[tuple[float, np.ndarray]] = []
 
+    def __getattr__(self, name):
+        # The planner's optional declarations (requires_log, set_log, attach, name, ...) are its
+        # own: the rollout reads them from whatever it is given.
+        if name == "inner":
+            raise AttributeError(name)
+        return getattr(self.inner, name)
+
     @property
     def raster(self):
         return self.inner.raster
@@ -58,17 +65,24 @@ def artifact_of(monitor: EpisodeMonitor, recording: RecordingPlanner | None, env
     planner makes one. Stores written before the frames were kept hold the final scene at 0.5 s
     steps and no `plans__` arrays; the report reads both."""
     from rasterize.frames import world_from_highway_env
-    from rasterize.scene_io import pack_scenes
 
     run = monitor.run
     final = run.recorder.scene(run.recorder.num_steps - 1, history_s=8.0, future_s=0.0,
                                dt_s=run.recorder.dt_s, source=env_id)
-    arrays = {f"final__{k}": v for k, v in pack_scenes([final]).items()}
     adversary = monitor.attack.adversary
+    where = None if adversary is None else world_from_highway_env(adversary.position)
+    return npz_bytes(scene_arrays(final, where, recording))
+
+
+def scene_arrays(final, adversary_xy: np.ndarray | None, recording: RecordingPlanner | None) -> dict:
+    """The artifact arrays of `artifact_of` from the final scene, the adversary's world position
+    at its last step (None: no adversary) and the recording planner."""
+    from rasterize.scene_io import pack_scenes
+
+    arrays = {f"final__{k}": v for k, v in pack_scenes([final]).items()}
     index = -1
-    if adversary is not None:
-        where = world_from_highway_env(adversary.position)
-        offsets = np.linalg.norm(final.states[:, final.current_index, :2] - where, axis=1)
+    if adversary_xy is not None:
+        offsets = np.linalg.norm(final.states[:, final.current_index, :2] - adversary_xy, axis=1)
         offsets[~final.valid[:, final.current_index]] = np.inf
         index = int(np.argmin(offsets)) if offsets.min() < 1e-3 else -1
     arrays["adversary_index"] = np.array(index)
@@ -82,6 +96,10 @@ def artifact_of(monitor: EpisodeMonitor, recording: RecordingPlanner | None, env
     if recording is not None and recording.risk_maps:
         arrays["plans__time_s"] = np.array([t for t, _ in recording.risk_maps], np.float32)
         arrays["plans__risk_map"] = np.stack([m for _, m in recording.risk_maps])
+    return arrays
+
+
+def npz_bytes(arrays: dict) -> bytes:
     buffer = io.BytesIO()
     np.savez_compressed(buffer, **arrays)
     return buffer.getvalue()

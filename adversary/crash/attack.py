@@ -116,9 +116,12 @@ def _ego_in_scene_frame(item: SceneTensors, track_world: np.ndarray) -> np.ndarr
 
 
 def attack_records(records: list, models: Models, planner, planner_spec: str, config: AttackConfig,
-                   seeds: list[int], panels: list[Path | None] | None = None) -> list[dict]:
+                   seeds: list[int], panels: list[Path | None] | None = None,
+                   keep_scenes: bool = False) -> list[dict]:
     """Attack every record (`adversary.crash.scenes.SceneRecord`) in one batch; one JSON-ready
-    dict per record (module docstring). Scenes are independent: batching only saves time."""
+    dict per record (module docstring). Scenes are independent: batching only saves time.
+    `keep_scenes`: an attacked record's dict also holds the final drive's last step as a Scene
+    (`final_scene`, not JSON) and the adversary's world position then (`adversary_xy`)."""
     from adversary.crash.judge import ego_track_2hz, judge, rollout
 
     started = time.perf_counter()
@@ -128,12 +131,12 @@ def attack_records(records: list, models: Models, planner, planner_spec: str, co
     model = models.traffic
     closed_loop = planner_spec != "replay"
 
-    def drive(i: int, traj: np.ndarray | None):
+    def drive(i: int, traj: np.ndarray | None, keep_scene: bool = False):
         t = time.perf_counter()
         n = items[i].num_agents
         tracks = np.zeros((0, 12, 6)) if traj is None else world_tracks(items[i], traj[:n])[1:]
         result = rollout(records[i], tracks, items[i].rows[1:] if traj is not None else [], planner,
-                         planner_spec)
+                         planner_spec, keep_scene=keep_scene)
         timing[i]["rollout_s"] += time.perf_counter() - t
         timing[i]["rollouts"] += 1
         return tracks, result
@@ -185,7 +188,7 @@ def attack_records(records: list, models: Models, planner, planner_spec: str, co
             out.append({**base, "status": "no_candidate", "collision": False,
                         "seconds": shared_s + timing[i]["rollout_s"], "timing": timing[i]})
             continue
-        tracks, final = drive(i, gen.traj[i].numpy())
+        tracks, final = drive(i, gen.traj[i].numpy(), keep_scene=keep_scenes)
         adv_row = int(item.rows[adversary])
         metrics = judge(record, tracks, item.rows[1:], adv_row, planner, planner_spec, result=final)
         panel = panels[i] if panels else None
@@ -205,6 +208,13 @@ def attack_records(records: list, models: Models, planner, planner_spec: str, co
                     "timing": {**timing[i], "rollout_s": round(timing[i]["rollout_s"], 3)},
                     # this scene's rollouts plus an equal share of the batch's optimisation
                     "seconds": shared_s + timing[i]["rollout_s"]})
+        if keep_scenes:
+            out[-1]["final_scene"] = final.final_scene
+            adv = final.recorder_id(int(record.agent_ids[adv_row]))
+            alive = adv >= 0 and final.valid[adv].any()
+            last = int(np.flatnonzero(final.valid[adv])[-1]) if alive else -1
+            out[-1]["adversary_xy"] = (final.states[adv, last, :2].copy()
+                                       if alive and last == final.valid.shape[1] - 1 else None)
     return out
 
 

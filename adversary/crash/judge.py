@@ -125,6 +125,7 @@ class Rollout:
     planner_spec: str
     drive: dict            # drive_episode's record (off_road, distance_m, plan times, ...)
     wall_s: float
+    final_scene: object = None   # the last step with its whole history (`keep_scene`), else None
 
     def recorder_id(self, log_id: int) -> int:
         """The recorder agent replaying log agent `log_id` (-1 if it never was on the road)."""
@@ -143,9 +144,11 @@ def _no_contact_response(run) -> None:
 
 
 def rollout(record: SceneRecord, tracks: np.ndarray, rows, planner, planner_spec: str,
-            control_hz: int = 10, replan_hz: int = 2) -> Rollout:
+            control_hz: int = 10, replan_hz: int = 2, keep_scene: bool = False) -> Rollout:
     """Drive `planner` (made from `planner_spec`) against the log spliced with `tracks` at `rows`
-    (module docstring). Empty `rows` (tracks [0, F, 6]) drives against the untouched record."""
+    (module docstring). Empty `rows` (tracks [0, F, 6]) drives against the untouched record.
+    `keep_scene`: also keep the last step as a `Scene` with the whole drive as history, at the
+    control rate, lanes included (the campaign report's frames)."""
     from riskmap.sim.log_replay import LogReplayEpisode
     from riskmap.sim.plan import requires_log
     from riskmap.sim.rollout import DriveConfig, DriveHooks, drive_episode
@@ -168,8 +171,12 @@ def rollout(record: SceneRecord, tracks: np.ndarray, rows, planner, planner_spec
     states, valid, sizes, _ = run.recorder.arrays()
     states, valid = states.copy(), valid.copy()
     ego = run.recorder.ego_id
+    final_scene = None
+    if keep_scene:
+        final_scene = run.recorder.scene(run.recorder.num_steps - 1, history_s=run.time_s,
+                                         future_s=0.0, dt_s=run.recorder.dt_s, source=scene.env_id)
     return Rollout(states, valid, sizes.copy(), ego, run.log_ids(), log.dt_s,
-                   record.t0_step, planner_spec, drive, time.perf_counter() - started)
+                   record.t0_step, planner_spec, drive, time.perf_counter() - started, final_scene)
 
 
 def ego_track_2hz(result: Rollout, past_steps: int = 4, future_steps: int = 12) -> np.ndarray:

@@ -9,7 +9,8 @@ for every job, and a frame costs milliseconds this way.
 An artifact holds the final scene with up to 8 s of history at the recording's rate (0.1 s;
 stores written before that hold 0.5 s steps, which are read the same way), the last plan, and the
 risk map of every plan with its time (`plans__`; older stores only the last plan's). A crash
-attack's artifact holds its own panel PNG (`crash_panel_png`) and no scene.
+attack's artifact holds its own panel PNG (`crash_panel_png`) and its final drive the same way
+(its whole 8 s; crash stores written before that hold the panel only).
 """
 
 from __future__ import annotations

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
+from adversary.report.frames import load_artifact, recorded_indices
 import torch
 
 from adversary.attacks.crash import SELECTORS
@@ -110,6 +112,10 @@ def test_a_crash_job_record_has_the_campaign_fields_and_the_attack(crash_campaig
         assert r["timing"]["wall_s"] > 0 and r["timing"]["attack_seconds"] > 0
         with np.load(crash_campaign / "artifacts" / f"{r['job_id']}.npz") as data:
             assert data["crash_panel_png"][:4].tobytes() == b"\x89PNG"
+        # The final drive is kept as the episode attacks keep theirs: the report animates it.
+        art = load_artifact(crash_campaign / "artifacts" / f"{r['job_id']}.npz")
+        assert art.has_frames and len(recorded_indices(art.final)) >= 70   # 8 s at 10 Hz
+        assert art.final.dt == pytest.approx(0.1) and art.final.lanes
 
 
 def _without_timing(record: dict) -> dict:
