@@ -51,6 +51,7 @@ Urban recordings (Lankershim) get an extent derived from their own data
 from __future__ import annotations
 
 import logging
+import warnings
 from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -123,11 +124,19 @@ def load_scenario(path: str | Path):
         # commonroad-io logs a warning per old-style lanelet successor tag ("successorRight ...
         # is of deprecated format"): hundreds per Lankershim file, none of them actionable.
         logging.getLogger(XMLFileReader.__module__).setLevel(logging.ERROR)
-        scenario, _ = XMLFileReader(str(path)).open()
+        with warnings.catch_warnings():
+            # shapely warns (on stderr) about NaN coordinates; they are refused just below
+            warnings.simplefilter("ignore", RuntimeWarning)
+            scenario, _ = XMLFileReader(str(path)).open()
     except Exception as err:  # noqa: BLE001 - any parse failure is a bad file for the user
         raise InputError(f"CommonRoad file {path} could not be read ({type(err).__name__}: "
                          f"{str(err).splitlines()[0] if str(err) else ''}); pass a valid scenario "
                          "file") from None
+    for lanelet in scenario.lanelet_network.lanelets:
+        for bound in (lanelet.left_vertices, lanelet.right_vertices, lanelet.center_vertices):
+            if not np.isfinite(np.asarray(bound, dtype=float)).all():
+                raise InputError(f"CommonRoad file {path}: lanelet {lanelet.lanelet_id} has NaN or inf "
+                                 "points; repair its map or leave the file out")
     return scenario
 
 

@@ -138,7 +138,26 @@ def check_packed(arrays: dict[str, np.ndarray], name: str) -> int:
     if arrays["point_offsets"].shape != (n_lanes + 1,) or arrays["lane_centre"].shape != (n_points, 2):
         raise InputError(f"{name}: lane arrays are inconsistent; re-collect this shard")
     _check_signals(arrays, w, name)
+    _check_finite(arrays, name)
     return w
+
+
+FINITE_KEYS = ("sizes", "dt_s", "time_s", "lane_centre", "lane_left", "lane_right", "lane_width_m",
+               "lane_start_s", "route_xy", "signal_stop_line", "signal_times_s")
+
+
+def _check_finite(arrays: dict[str, np.ndarray], name: str) -> None:
+    """NaN or inf in a valid state, a box, a lane or a route is a damaged shard (a Scene would
+    refuse it later, naming no file)."""
+    bad = arrays["valid"] & ~np.isfinite(arrays["states"]).all(axis=-1)
+    if bad.any():
+        w, agent, step = (int(i) for i in np.argwhere(bad)[0])
+        raise InputError(f"{name}: window {w} holds NaN/inf states (agent row {agent}, step {step}); "
+                         "delete the shard and run `riskmap collect ... --resume` to write it again")
+    for key in FINITE_KEYS:
+        if key in arrays and not np.isfinite(arrays[key]).all():
+            raise InputError(f"{name}: {key} holds NaN/inf; delete the shard and run "
+                             "`riskmap collect ... --resume` to write it again")
 
 
 def unpack_scene(arrays: dict[str, np.ndarray], index: int, source: str = "") -> Scene:

@@ -166,7 +166,7 @@ def _from_python(spec: str, arg: str, seed: int):
         except TypeError as err:
             names = ", ".join(signature.parameters) or "nothing"
             raise InputError(f"planner {spec!r}: {attribute} does not take these keys ({err}); "
-                             f"it takes {names}") from None
+                             f"drop them: it takes {names}") from None
     return factory, kwargs
 
 

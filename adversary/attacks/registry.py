@@ -32,7 +32,8 @@ def register_attack(name: str, params_type: type, factory: Callable[[Any, int], 
 
 def attack_entry(name: str) -> AttackEntry:
     if name not in _REGISTRY:
-        raise InputError(f"unknown attack {name!r}; registered attacks: {', '.join(sorted(_REGISTRY))}")
+        raise InputError(f"unknown attack {name!r}; use one of the registered attacks: "
+                         f"{', '.join(sorted(_REGISTRY))}")
     return _REGISTRY[name]
 
 

@@ -152,6 +152,13 @@ def load_campaign(path: Path) -> CampaignConfig:
                          "(see experiments/campaigns/)")
     try:
         data = yaml.safe_load(path.read_text())
+    except UnicodeDecodeError:
+        raise InputError(f"--config {path} is not a text file; pass a campaign YAML "
+                         "(see experiments/campaigns/)") from None
     except yaml.YAMLError as error:
-        raise InputError(f"--config {path}: not valid YAML ({str(error).splitlines()[0]})") from None
+        raise InputError(f"--config {path}: not valid YAML ({str(error).splitlines()[0]}); fix its "
+                         "syntax (see experiments/campaigns/ for examples)") from None
+    if data is None:
+        raise InputError(f"--config {path} is empty; write a campaign YAML (see "
+                         "experiments/campaigns/)")
     return campaign_from_dict(data, f"campaign config {path}")

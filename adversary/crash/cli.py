@@ -8,7 +8,7 @@ import json
 from pathlib import Path
 
 from adversary.crash.config import TrainSelectorConfig, TrainTrafficConfig
-from riskmap.infra.cli import add_config_options, config_from_args, positive_int
+from riskmap.infra.cli import add_config_options, config_from_args, non_negative_int, positive_int
 
 
 def _run_train_traffic(args: argparse.Namespace) -> int:
@@ -143,9 +143,10 @@ def add_attack_parsers(subparsers) -> None:
     p.add_argument("--selector-model", default=None,
                    help="directory with selector_mam / selector_no_mam (default: checkpoints/crash_selector_<family>)")
     p.add_argument("--replan-every", type=positive_int, default=20, help="k: planner re-runs every k iterations")
-    p.add_argument("--iterations", type=int, default=0, help="0: 300 for replay, 200 for a closed-loop planner")
+    p.add_argument("--iterations", type=non_negative_int, default=0,
+                   help="0: 300 for replay, 200 for a closed-loop planner")
     p.add_argument("--full-iterations", action="store_true", help="do not stop at the first collision")
-    p.add_argument("--panels", type=int, default=0, help="write PNG panels of the first N scenes")
+    p.add_argument("--panels", type=non_negative_int, default=0, help="write PNG panels of the first N scenes")
     p.add_argument("--resume", action="store_true")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=_run_attack)

@@ -3,7 +3,15 @@ them: `riskmap.infra.cli.add_config_options`)."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+
+from rasterize.errors import InputError
+
+
+def _check(ok: bool, flag: str, value, rule: str) -> None:
+    if not ok:
+        raise InputError(f"{flag} {value}: must be {rule}")
 
 
 @dataclass(frozen=True)
@@ -20,6 +28,16 @@ class TrainTrafficConfig:
     seed: int = 0
     max_windows_per_episode: int = 0   # 0: all
 
+    def __post_init__(self) -> None:
+        _check(math.isfinite(self.lr) and self.lr > 0, "--lr", self.lr, "a positive number")
+        _check(math.isfinite(self.kl_weight) and self.kl_weight >= 0, "--kl-weight", self.kl_weight,
+               "a finite number >= 0")
+        _check(math.isfinite(self.free_bits) and self.free_bits >= 0, "--free-bits", self.free_bits,
+               "a finite number of nats >= 0")
+        _check(self.max_windows_per_episode >= 0, "--max-windows-per-episode",
+               self.max_windows_per_episode, "0 (all) or more")
+        _check(0 <= self.val_fraction < 1, "val_fraction", self.val_fraction, "in [0, 1)")
+
 
 @dataclass(frozen=True)
 class TrainSelectorConfig:
@@ -30,3 +48,7 @@ class TrainSelectorConfig:
     lr: float = 1e-3
     val_fraction: float = 0.2       # of the labelled scenes (by order, i.e. by episode)
     seed: int = 0
+
+    def __post_init__(self) -> None:
+        _check(math.isfinite(self.lr) and self.lr > 0, "--lr", self.lr, "a positive number")
+        _check(0 <= self.val_fraction < 1, "val_fraction", self.val_fraction, "in [0, 1)")

@@ -43,6 +43,7 @@ from rasterize.scene import AgentKind
 from riskmap.guard.dataset import GuardCollectConfig, extract_windows, split_counts
 from riskmap.infra.atomic import write_json, write_npz
 from riskmap.infra.provenance import provenance
+from riskmap.infra.rundir import lock_out_dir
 
 SPLIT_CHARS = set("abcdefghijklmnopqrstuvwxyz0123456789")
 CUTS = ("contact", "judge")
@@ -81,14 +82,29 @@ def read_attack_run(path: Path) -> AttackRun:
     path = Path(path)
     try:
         meta = json.loads((path / "run.json").read_text())
-    except (OSError, ValueError):
-        raise InputError(f"--attacks {path} holds no run.json; point it at an `adversary attack --out` "
-                         "directory") from None
+        planner, selector = meta["planner"], meta["config"]["selector"]
+        scenes, seed = Path(meta["scenes"]), int(meta["seed"])
+    except (OSError, ValueError, KeyError, TypeError):
+        raise InputError(f"--attacks {path} holds no readable run.json; point it at an `adversary "
+                         "attack --out` directory") from None
     names = tuple(sorted(p.stem for p in (path / "attacks").glob("*.json")))
     if not names:
-        raise InputError(f"--attacks {path} holds no attack records yet (attacks/*.json)")
-    return AttackRun(path, meta["planner"], meta["config"]["selector"], Path(meta["scenes"]), int(meta["seed"]),
-                     names)
+        raise InputError(f"--attacks {path} holds no attack records yet (attacks/*.json); run "
+                         f"`adversary attack --out {path}` first")
+    return AttackRun(path, planner, selector, scenes, seed, names)
+
+
+def read_attack(run: AttackRun, name: str) -> dict:
+    """Attack record `name` of `run`; a damaged one is an InputError naming it."""
+    path = run.path / "attacks" / f"{name}.json"
+    try:
+        attack = json.loads(path.read_text())
+        if not isinstance(attack, dict) or (attack.get("status") == "ok" and "scene" not in attack):
+            raise ValueError("not an attack record")
+    except (OSError, ValueError):
+        raise InputError(f"attack record {path} is damaged; delete it and run `adversary attack "
+                         f"--resume --out {run.path}` to attack that scene again") from None
+    return attack
 
 
 def job_name(split: str, env_id: str, planner: str, selector: str, scene_seed: int, scene: str) -> str:
@@ -177,11 +193,19 @@ def export(attack_dirs: list[Path], out: Path, config: GuardDataConfig = GuardDa
     from riskmap.registry import cached_planner
 
     runs = [read_attack_run(Path(d)) for d in attack_dirs]
+    todo = [(run, i, name) for run in runs for i, name in enumerate(run.names)]
+    # Every record and the scene of every attack that will be driven again are read before
+    # --out exists: a damaged one stops the export with nothing written.
+    attacks = {(run.path, name): read_attack(run, name) for run, _, name in todo}
+    for run, _, name in todo:
+        if attacks[run.path, name].get("status") == "ok":
+            load_record(run.scenes / f"{name}.npz")
+    # One writer per guard dataset; it also removes the temporary files a killed writer left.
+    lock_out_dir(Path(out))
     jobs_dir = Path(out) / "jobs"
     metas = []
-    todo = [(run, i, name) for run in runs for i, name in enumerate(run.names)]
     for run, i, name in tqdm(todo, disable=not progress, desc="guard data"):
-        attack = json.loads((run.path / "attacks" / f"{name}.json").read_text())
+        attack = attacks[run.path, name]
         if attack.get("status") != "ok":
             metas.append({"attack": str(run.path / "attacks" / name), "skipped": attack.get("status")})
             continue

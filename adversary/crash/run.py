@@ -2,13 +2,16 @@
 
 Scenes: DIR/scene_NNNN.npz (+ .json) written by `record_scenes`, sweeping episodes 0, 1, ... of
 `--seed` and skipping those that cannot be attacked (the human crashed before t0 + horizon, or
-no vehicle near the ego); DIR/index.json lists them in order.
+no vehicle near the ego); DIR/index.json lists them in order. The index is the commit point: a
+scene counts once it is listed there, and `--resume` goes on from what the index says.
 
 Attacks: OUT/attacks/<scene>.json, one per scene, written atomically as soon as its batch
 finishes (`--batch-size` scenes are optimised together: one Adam step updates all of them, which
-costs little more than one scene on a CPU); `--resume` skips the scenes already there. OUT/summary.json and
-OUT/table.md aggregate them (denominators included). With `--workers K` scenes run in a process
-pool; every scene's random draws depend only on (seed, scene), so results do not depend on K.
+costs little more than one scene on a CPU; batches are fixed slices of the scene list); `--resume`
+runs again only the batches with a scene not there, and writes only the missing records.
+OUT/summary.json and OUT/table.md aggregate them (denominators included). With `--workers K`
+scenes run in a process pool; every scene's random draws depend only on (seed, scene), so results
+do not depend on K.
 """
 
 from __future__ import annotations
@@ -25,7 +28,7 @@ from rasterize.errors import InputError
 from riskmap.infra.atomic import atomic_write, write_json
 from riskmap.infra.parallel import run_parallel
 from riskmap.infra.provenance import provenance
-from riskmap.infra.rundir import claim_out_dir
+from riskmap.infra.rundir import claim_out_dir, lock_out_dir, read_settings, refuse_unless_resume
 from riskmap.sim.record import current_names
 
 INDEX = "index.json"
@@ -37,15 +40,21 @@ def record_scenes(env_id: str, seed: int, count: int, out: Path, first_episode: 
 
     out = Path(out)
     index_path = out / INDEX
-    index = json.loads(index_path.read_text()) if resume and index_path.exists() else None
+    # Settings no episode can satisfy (an unknown env, too short a history) stop here, before
+    # --out exists: inside the loop they would only skip one episode after another, forever.
+    if seed < 0 or first_episode < 0:
+        raise InputError(f"--seed {seed} and --first-episode {first_episode} must be 0 or more")
+    AttackScene(env_id, seed, first_episode, t0_s).check(control_hz=10)
+    refuse_unless_resume(out, "scenes", None, resume)
+    # The index is the commit point: a scene counts once the index lists it. A run killed before
+    # its first index write left scene files but no index; resuming it starts afresh over them.
+    index = read_settings(index_path) if resume and index_path.exists() else None
+    if index is not None and (index["env_id"], index["seed"], index["t0_s"]) != (env_id, seed, t0_s):
+        raise InputError(f"--out {out} holds scenes of {index['env_id']} seed {index['seed']}; choose another --out")
+    lock_out_dir(out)   # one writer (creates it); removes the temporary files a killed writer left
     if index is None:
-        if out.exists() and any(out.iterdir()):
-            raise InputError(f"--out {out} already holds scenes; pass --resume or choose another --out")
         index = {"env_id": env_id, "seed": seed, "t0_s": t0_s, "scenes": [], "skipped": [],
                  "next_episode": first_episode, **provenance()}
-    elif (index["env_id"], index["seed"], index["t0_s"]) != (env_id, seed, t0_s):
-        raise InputError(f"--out {out} holds scenes of {index['env_id']} seed {index['seed']}; choose another --out")
-    out.mkdir(parents=True, exist_ok=True)
     while len(index["scenes"]) < count:
         episode = index["next_episode"]
         name = f"scene_{episode:05d}"
@@ -167,10 +176,13 @@ TABLE_HEADER = ("| run | collision | adv off-road % | other off-road % | kinemat
 def run_attacks(planner_spec: str, scenes_dir: Path, count: int, config: AttackConfig, seed: int,
                 out: Path, traffic: Path, selectors: Path | None, workers: int = 1, resume: bool = False,
                 panels: int = 0, progress: bool = True, batch_size: int = 8) -> dict:
+    from adversary.crash.scenes import load_record
     from riskmap.registry import make_planner
 
     out = Path(out)
     paths = scene_paths(scenes_dir, count)
+    for path in paths:                             # a damaged scene fails here, before any work
+        load_record(path)
     make_planner(planner_spec, seed=seed)          # a bad SPEC fails here, before any work
     load_models(Path(traffic), Path(selectors) if selectors else None)
     attacks_dir = out / "attacks"
@@ -179,13 +191,19 @@ def run_attacks(planner_spec: str, scenes_dir: Path, count: int, config: AttackC
     claim_out_dir(out, holds="attacks", marker="attacks", resume=resume, settings_file="run.json",
                   settings=meta, may_change=("count",))
     attacks_dir.mkdir(parents=True, exist_ok=True)
-    todo = [p for p in paths if not (attacks_dir / f"{p.stem}.json").exists()]
+    finished = {p.stem for p in paths if (attacks_dir / f"{p.stem}.json").exists()}
     panels_dir = out / "panels"
 
     def panel_for(i: int) -> str | None:
         return str(panels_dir / f"{paths[i].stem}.png") if i < panels else None
 
-    batches = [todo[i:i + batch_size] for i in range(0, len(todo), batch_size)]
+    # Batches are fixed slices of the scene list: a scene's numbers depend on the scenes optimised
+    # with it (float rounding of the batched model, the losses kept by the first), so a resumed run
+    # batches every scene as an uninterrupted one does. A batch that a kill cut off runs whole
+    # again; only its missing records are written.
+    batches = [chunk for chunk in (paths[i:i + batch_size] for i in range(0, len(paths), batch_size))
+               if any(p.stem not in finished for p in chunk)]
+    todo = [p for chunk in batches for p in chunk if p.stem not in finished]
     args = [([str(p) for p in chunk], planner_spec, config, seed, str(traffic),
              str(selectors) if selectors else None, [panel_for(paths.index(p)) for p in chunk])
             for chunk in batches]
@@ -194,6 +212,8 @@ def run_attacks(planner_spec: str, scenes_dir: Path, count: int, config: AttackC
     def save(results: list[dict]) -> None:
         nonlocal done
         for result in results:
+            if result["name"] in finished:
+                continue          # kept from the killed run (the same record)
             write_json(attacks_dir / f"{result['name']}.json", result)
             done += 1
             if progress:

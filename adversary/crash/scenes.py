@@ -48,7 +48,8 @@ class AttackScene:
             raise InputError(f"attack time t0_s={self.t0_s} leaves less than {HISTORY_S} s of history; "
                              f"use t0_s >= {HISTORY_S}")
         for name, value in (("t0_s", self.t0_s), ("horizon_s", self.horizon_s)):
-            if value <= 0 or abs(value / WINDOW_DT_S - round(value / WINDOW_DT_S)) > 1e-9:
+            if (not np.isfinite(value) or value <= 0
+                    or abs(value / WINDOW_DT_S - round(value / WINDOW_DT_S)) > 1e-9):
                 raise InputError(f"{name}={value} must be a positive multiple of {WINDOW_DT_S} s")
         if control_hz <= 0 or abs(control_hz * WINDOW_DT_S - round(control_hz * WINDOW_DT_S)) > 1e-9:
             raise InputError(f"control_hz={control_hz} must be a multiple of {1 / WINDOW_DT_S:g} Hz")
@@ -168,13 +169,26 @@ def save_record(record: SceneRecord, path: Path) -> None:
 
 def load_record(path: Path) -> SceneRecord:
     """The SceneRecord `save_record` wrote to `path` (bit-identical arrays)."""
+    import zipfile
+
     path = Path(path)
     try:
         scene = AttackScene(**json.loads(path.with_suffix(".json").read_text()))
         with np.load(path) as data:
             d = {key: data[key] for key in data.files}
-    except (OSError, KeyError, ValueError, TypeError) as err:
-        raise InputError(f"scene record {path} is unreadable ({err}); delete it and record it again") from None
+        missing = sorted({"log_states", "log_valid", "log_sizes", "log_kinds", "log_ego_id", "log_dt_s",
+                          "agent_ids", "point_offsets", "lane_centre", "route_xy"} - set(d))
+        if missing:
+            raise KeyError(f"no {', '.join(missing)}")
+    except (OSError, KeyError, ValueError, TypeError, EOFError, zipfile.BadZipFile) as err:
+        reason = (str(err).splitlines() or [type(err).__name__])[0] or type(err).__name__
+        raise InputError(f"scene record {path} is unreadable ({reason}); record the scenes again "
+                         "with `adversary scenes` into a new --out") from None
+    floats = [d[k] for k in ("log_sizes", "lane_centre", "route_xy", "log_dt_s")]
+    if ((d["log_valid"] & ~np.isfinite(d["log_states"]).all(axis=-1)).any()
+            or not all(np.isfinite(a).all() for a in floats)):
+        raise InputError(f"scene record {path} holds NaN/inf; record the scenes again with "
+                         "`adversary scenes` into a new --out")
     log = HumanLog(d["log_states"], d["log_valid"], d["log_sizes"], d["log_kinds"], int(d["log_ego_id"]),
                    float(d["log_dt_s"]), bool(d["log_crashed"]), bool(d["log_off_road"]))
     offsets = d["point_offsets"]

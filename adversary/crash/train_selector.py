@@ -11,8 +11,10 @@ the expected generation loss under its own distribution,
 so p moves towards the agents whose attack the generator can complete most cheaply. The traffic
 model is frozen; the selector sees its context latents Z (after message passing).
 
-Files in RUN: labels.jsonl (one line per scene, appended as it is computed; `--resume` keeps
-them), selector_mam / selector_no_mam (safetensors + sidecar), summary.json.
+Files in RUN: labels.jsonl (one line per scene, written atomically as each is computed; `--resume`
+keeps them), selector_mam / selector_no_mam (safetensors + sidecar), summary.json. Labelling draws
+nothing from torch's generator, so the selectors start from the same draws whether the labels were
+made now or by a killed run (a resumed run trains the same selectors).
 """
 
 from __future__ import annotations
@@ -31,7 +33,7 @@ from adversary.crash.features import SceneTensors
 from adversary.crash.generate import GenerationConfig, attack_loss, generate, logged_ego_future
 from adversary.crash.selection import SelectionModule, candidates, distance_weights
 from adversary.crash.train_traffic import load_traffic_model, load_windows, scene_collides
-from riskmap.infra.atomic import write_json
+from riskmap.infra.atomic import atomic_write, write_json
 from riskmap.infra.checkpoint import load_weights, read_sidecar, save_checkpoint
 from riskmap.infra.rundir import lock_out_dir, refuse_unless_resume
 
@@ -106,12 +108,13 @@ def train_selector(traffic_checkpoint: Path, data: list[Path], out: Path,
                    progress: bool = True) -> dict:
     out = Path(out)
     refuse_unless_resume(out, "a run", None, resume)
-    lock_out_dir(out)   # one writer per run directory (creates it)
     torch.manual_seed(config.seed)
+    # The traffic model and the data are read (and bad ones refused) before --out exists.
     model, features, traffic_meta = load_traffic_model(traffic_checkpoint)
     for param in model.parameters():
         param.requires_grad_(False)
     train_items, _ = load_windows(data, features, 0.0, config.windows_per_episode)
+    lock_out_dir(out)   # one writer per run directory (creates it)
     rng = np.random.default_rng(config.seed)
     items = [train_items[i] for i in sorted(rng.permutation(len(train_items))[: config.max_scenes])]
     labels_path = out / "labels.jsonl"
@@ -120,10 +123,9 @@ def train_selector(traffic_checkpoint: Path, data: list[Path], out: Path,
         labels = [json.loads(line) for line in labels_path.read_text().splitlines() if line.strip()]
     started = time.perf_counter()
     for i in range(len(labels), len(items)):
-        label = label_scene(model, items[i], config.label_iterations)
-        with open(labels_path, "a") as f:
-            f.write(json.dumps(label) + "\n")
-        labels.append(label)
+        labels.append(label_scene(model, items[i], config.label_iterations))
+        # Rewritten whole, atomically: a kill leaves the lines of finished scenes, never half a line.
+        atomic_write(labels_path, lambda f: f.write("".join(json.dumps(lab) + "\n" for lab in labels).encode()))
         if progress and i % 10 == 0:
             print(f"labelled {i + 1}/{len(items)} scenes ({time.perf_counter() - started:.0f} s)", flush=True)
     kept = [(it, lab) for it, lab in zip(items, labels) if lab is not None]

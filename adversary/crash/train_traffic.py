@@ -3,8 +3,11 @@
 Loss per scene: the posterior reconstruction of every agent's known future (mean position
 error in units of `position_scale_m`, heading 1 - cos, speed error) plus beta * KL(q || p),
 averaged over real agents. Validation holds out whole episodes (the last `val_fraction` of each
-dataset's shards). Every epoch appends to RUN/log.jsonl and keeps the best validation ADE as
-RUN/best (safetensors + sidecar); RUN/state.pt lets `--resume` continue where it stopped.
+dataset's shards). Every epoch ends in one atomic write of RUN/state.pt, the commit point that
+`--resume` continues from: weights, optimiser, both random generators, the log and the best
+weights so far. RUN/log.jsonl (a line per epoch) and RUN/best (safetensors + sidecar, the best
+validation ADE) are derived from it, written after it and again on resume, so a run killed
+anywhere resumes to the files of an uninterrupted one.
 
 Realism metrics (`evaluate_model`), on the validation scenes:
     recon ADE / FDE (m)   posterior mean decoded, against the logged futures of every agent
@@ -32,8 +35,8 @@ from adversary.crash.traffic_model import TrafficModel, TrafficModelConfig, kl_n
 from rasterize.errors import InputError
 from rasterize.frames import box_corners
 from rasterize.geometry import boxes_overlap
-from riskmap.infra.atomic import write_json
-from riskmap.infra.checkpoint import load_weights, read_sidecar, save_checkpoint
+from riskmap.infra.atomic import atomic_write, write_json
+from riskmap.infra.checkpoint import load_state, load_weights, read_sidecar, save_checkpoint, save_state
 from riskmap.infra.rundir import lock_out_dir, refuse_unless_resume
 
 CHECKPOINT_KIND = "traffic_cvae"
@@ -48,7 +51,8 @@ def load_windows(roots: list[Path], features: FeatureConfig, val_fraction: float
     for root in roots:
         data = DemoDataset(root)
         episodes = sorted({data.episode_of(i) for i in range(len(data))})
-        cut = episodes[round(len(episodes) * (1.0 - val_fraction))] if val_fraction > 0 else None
+        kept = round(len(episodes) * (1.0 - val_fraction))     # episodes that train
+        cut = episodes[kept] if val_fraction > 0 and kept < len(episodes) else None
         taken: dict[int, int] = {}
         for i in range(len(data)):
             ep = data.episode_of(i)
@@ -191,6 +195,21 @@ def load_traffic_model(path: Path) -> tuple[TrafficModel, FeatureConfig, dict]:
     return model, features, data
 
 
+def _write_log(out: Path, records: list[dict]) -> None:
+    """RUN/log.jsonl: one line per finished epoch (rewritten whole, atomically)."""
+    atomic_write(out / "log.jsonl", lambda f: f.write("".join(json.dumps(r) + "\n" for r in records).encode()))
+
+
+def _save_best(out: Path, model_config: TrafficModelConfig, features: FeatureConfig, weights: dict,
+               sidecar: dict) -> None:
+    """RUN/best (safetensors + sidecar) from the best epoch's weights. Draws nothing from torch's
+    global generator (training goes on with it)."""
+    with torch.random.fork_rng(devices=[]):
+        model = TrafficModel(model_config, features.lane_chunks, features.chunk_points)
+    model.load_state_dict(weights)
+    save_checkpoint(out / "best", model, sidecar, kind=CHECKPOINT_KIND)
+
+
 def train_traffic(data: list[Path], out: Path, config: TrainTrafficConfig = TrainTrafficConfig(),
                   model_config: TrafficModelConfig | None = None,
                   features: FeatureConfig | None = None, resume: bool = False,
@@ -199,23 +218,37 @@ def train_traffic(data: list[Path], out: Path, config: TrainTrafficConfig = Trai
     features = features or FeatureConfig()
     out = Path(out)
     refuse_unless_resume(out, "a run", None, resume)
+    started = time.perf_counter()
+    # The data is read (and bad data refused) before --out exists.
+    train, val = load_windows(data, features, config.val_fraction, config.max_windows_per_episode)
     lock_out_dir(out)   # one writer per run directory (creates it)
     torch.manual_seed(config.seed)
     rng = np.random.default_rng(config.seed)
-    started = time.perf_counter()
-    train, val = load_windows(data, features, config.val_fraction, config.max_windows_per_episode)
     model = TrafficModel(model_config, features.lane_chunks, features.chunk_points)
     optimiser = torch.optim.Adam(model.parameters(), lr=config.lr)
-    first_epoch, best = 0, float("inf")
+    meta = {"config": asdict(config), "model": model_config.to_dict(), "features": asdict(features),
+            "data": [str(d) for d in data], "train_scenes": len(train), "val_scenes": len(val)}
+    first_epoch, best, records, best_weights, best_sidecar = 0, float("inf"), [], None, None
     state_path = out / "state.pt"
     if resume and state_path.exists():
-        state = torch.load(state_path, weights_only=False)
+        state = load_state(state_path)
         model.load_state_dict(state["model"])
         optimiser.load_state_dict(state["optimiser"])
         first_epoch, best = state["epoch"] + 1, state["best"]
-        rng = np.random.default_rng([config.seed, first_epoch])
-    meta = {"config": asdict(config), "model": model_config.to_dict(), "features": asdict(features),
-            "data": [str(d) for d in data], "train_scenes": len(train), "val_scenes": len(val)}
+        if "log" in state:
+            records, best_weights, best_sidecar = state["log"], state["best_model"], state["best_sidecar"]
+            rng.bit_generator.state = state["numpy_rng"]
+            torch.set_rng_state(state["torch_rng"])
+            # The files derived from the commit point, as it left them: a kill may have cut them
+            # off, or written those of an epoch that did not commit.
+            _write_log(out, records)
+            if best_weights is not None:
+                _save_best(out, model_config, features, best_weights, best_sidecar)
+        else:   # a state.pt of an older version: its log lines, a new draw of the data order
+            log = out / "log.jsonl"
+            lines = log.read_text().splitlines() if log.exists() else []
+            records = [r for r in map(json.loads, filter(str.strip, lines)) if r["epoch"] < first_epoch]
+            rng = np.random.default_rng([config.seed, first_epoch])
     write_json(out / "run.json", meta)
     for epoch in range(first_epoch, config.epochs):
         model.train()
@@ -232,18 +265,23 @@ def train_traffic(data: list[Path], out: Path, config: TrainTrafficConfig = Trai
                   "train_kl": float(np.mean([p["kl"] for p in losses])),
                   "val_recon_ade_m": metrics["recon_ade_m"], "val_recon_fde_m": metrics["recon_fde_m"],
                   "elapsed_s": round(time.perf_counter() - started, 1)}
-        with open(out / "log.jsonl", "a") as log:
-            log.write(json.dumps(record) + "\n")
         if progress:
             print(json.dumps(record), flush=True)
-        if metrics["recon_ade_m"] < best:
+        improved = metrics["recon_ade_m"] < best
+        if improved:
             best = metrics["recon_ade_m"]
-            save_checkpoint(out / "best", model, {**meta, "epoch": epoch, "val": metrics},
-                            kind=CHECKPOINT_KIND)
-        tmp = out / "state.pt.tmp"
-        torch.save({"model": model.state_dict(), "optimiser": optimiser.state_dict(), "epoch": epoch,
-                    "best": best}, tmp)
-        tmp.replace(state_path)
+            best_weights = {k: v.detach().clone() for k, v in model.state_dict().items()}
+            best_sidecar = {**meta, "epoch": epoch, "val": metrics}
+        records = records + [record]
+        # The commit point of the epoch: one file with all that resume needs (the log and the
+        # best weights too); log.jsonl and best.* are derived from it, after it.
+        state = {"model": model.state_dict(), "optimiser": optimiser.state_dict(), "epoch": epoch,
+                 "best": best, "numpy_rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state(),
+                 "log": records, "best_model": best_weights, "best_sidecar": best_sidecar}
+        save_state(state_path, state)
+        _write_log(out, records)
+        if improved:
+            _save_best(out, model_config, features, best_weights, best_sidecar)
     model, _, _ = load_traffic_model(out / "best")
     final = evaluate_model(model, val or train[:64], samples=5, seed=config.seed)
     summary = {**meta, "best_val_recon_ade_m": best, "val": final,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 from pathlib import Path
 
 from rasterize.errors import InputError
@@ -31,8 +32,15 @@ def _run_search(args: argparse.Namespace) -> int:
 def _run_report(args: argparse.Namespace) -> int:
     from adversary.search.report import write_report
 
-    if not (Path(args.out) / "run.json").exists():
+    run_json = Path(args.out) / "run.json"
+    if not run_json.exists():
         raise InputError(f"--out {args.out} holds no search run (no run.json); run `adversary search`")
+    try:
+        if "config" not in json.loads(run_json.read_text()):
+            raise ValueError("no config")
+    except (OSError, ValueError, TypeError):
+        raise InputError(f"{run_json} is damaged (not the run.json of `adversary search`); run "
+                         "`adversary search` again into a new --out") from None
     _print_summary(write_report(Path(args.out), frames=not args.no_frames), args.out)
     return 0
 

@@ -66,6 +66,9 @@ class SearchConfig:
             raise InputError(f"--pop must be ≥ 2 and --gen ≥ 1, got {self.pop} and {self.gen}")
         if self.workers < 1:
             raise InputError(f"--workers must be ≥ 1, got {self.workers}")
+        if not (self.episode_s < float("inf") and self.evaluation.steps >= 1):
+            raise InputError(f"--episode-s must be a finite number of seconds ≥ "
+                             f"{0.5 / self.evaluation.control_hz:g}, got {self.episode_s}")
         get_template(self.template)
 
     @property
@@ -249,8 +252,10 @@ def search(config: SearchConfig, out: Path, resume: bool = False, progress: bool
     from tqdm import tqdm
 
     from adversary.search.report import write_report
+    from riskmap.registry import make_planner
 
     out = Path(out)
+    make_planner(config.planner, seed=config.seed)   # a bad SPEC fails here, before --out exists
     _check_out(out, config, resume)
     write_json(out / "run.json", {"config": asdict(config), **provenance()})
     template = get_template(config.template)

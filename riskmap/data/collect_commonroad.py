@@ -144,11 +144,11 @@ class CommonRoadCollectConfig:
         return data
 
 
-def scenario_files(inputs: list[str | Path]) -> list[Path]:
+def scenario_files(inputs: list[str | Path], flag: str = "--from-commonroad") -> list[Path]:
     """The CommonRoad .xml files named by `inputs` (files, or directories searched recursively),
-    sorted and without duplicates."""
+    sorted and without duplicates; `flag` names the option they came from in messages."""
     if not inputs:
-        raise InputError("--from-commonroad needs at least one scenario file or directory")
+        raise InputError(f"{flag} needs at least one scenario file or directory")
     found: set[Path] = set()
     for item in map(Path, inputs):
         if item.is_dir():
@@ -156,10 +156,11 @@ def scenario_files(inputs: list[str | Path]) -> list[Path]:
         elif item.is_file():
             found.add(item.resolve())
         else:
-            raise InputError(f"--from-commonroad {item} does not exist; pass CommonRoad .xml files "
+            raise InputError(f"{flag} {item} does not exist; pass CommonRoad .xml files "
                              "or directories holding them")
     if not found:
-        raise InputError(f"--from-commonroad {' '.join(map(str, inputs))}: no .xml scenario files found")
+        raise InputError(f"{flag} {' '.join(map(str, inputs))}: no .xml scenario files "
+                         "found; pass CommonRoad .xml files or directories holding them")
     return sorted(found)
 
 

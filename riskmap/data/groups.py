@@ -21,9 +21,13 @@ def match_groups(dataset: DemoDataset, groups: list[str], wanted: tuple[str, ...
     chosen = set()
     for name in wanted:
         hits = [g for g in groups if g == name or g.endswith(f"-{name}")]
+        if not hits and not groups:
+            raise InputError(f"group {name}: dataset {dataset.root} has no groups (only recorded "
+                             "data from `riskmap collect --from-commonroad` has); leave the groups "
+                             "option out")
         if not hits:
-            raise InputError(f"group {name}: dataset {dataset.root} has no such group; its groups "
-                             f"are {', '.join(groups)}")
+            raise InputError(f"group {name}: dataset {dataset.root} has no such group; use one "
+                             f"of {', '.join(groups)}")
         chosen.update(hits)
     return chosen
 

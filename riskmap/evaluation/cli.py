@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 from rasterize.errors import InputError
-from riskmap.infra.cli import comma_list, positive_int
+from riskmap.infra.cli import comma_list, positive_float, positive_int
 
 
 def _cmd_drive(args: argparse.Namespace) -> int:
@@ -31,6 +32,9 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     from riskmap.evaluation.evaluate import EvalConfig, evaluate
 
     planners = tuple(p.strip() for p in args.planners.split(",") if p.strip())
+    if not planners:
+        raise InputError(f"--planners {args.planners!r} names no planner; give comma-separated "
+                         "SPECs, e.g. idm,cv,riskmap:checkpoints/riskmap_highway")
     if args.commonroad:
         from riskmap.evaluation.evaluate_commonroad import evaluate_commonroad
 
@@ -85,6 +89,9 @@ def _cmd_tune_goal_variance(args: argparse.Namespace) -> int:
         candidates = tuple(float(v) for v in args.candidates.split(","))
     except ValueError:
         raise InputError(f"--candidates {args.candidates!r}: give comma-separated numbers, e.g. 5,2,1") from None
+    if not all(math.isfinite(v) and v > 0 for v in candidates):
+        raise InputError(f"--candidates {args.candidates!r}: every goal variance must be a finite "
+                         "number of cells² > 0, e.g. 5,2,1")
     planning = tune_goal_variance(Path(args.checkpoint), Path(args.data), candidates, args.limit,
                                   write=not args.dry_run, goal=args.goal, groups=args.groups,
                                   timing=args.timing,
@@ -106,7 +113,7 @@ def add_parsers(sub) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", required=True)
     p.add_argument("--frames", action="store_true", help="write a PNG per replan")
-    p.add_argument("--goal-variance", type=float, default=None,
+    p.add_argument("--goal-variance", type=positive_float, default=None,
                    help="cells²; planning-time goal variance of a risk-map planner (default: the "
                         "checkpoint's)")
     p.add_argument("--resume", action="store_true")
@@ -120,7 +127,7 @@ def add_parsers(sub) -> None:
                                                       "intersection-v0"),
                    help="comma-separated highway-env ids (default: one of each family)")
     p.add_argument("--episodes", type=positive_int, default=1, help="episodes per family")
-    p.add_argument("--seconds", type=float, default=8.0, help="seconds driven per episode")
+    p.add_argument("--seconds", type=positive_float, default=8.0, help="seconds driven per episode")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=_cmd_check_planner)
@@ -134,7 +141,7 @@ def add_parsers(sub) -> None:
     p.add_argument("--goal", choices=("route", "human"), default=None,
                    help="with --commonroad: the route rule's goal (default) or the recorded "
                         "vehicle's own end position (the planner paper's protocol)")
-    p.add_argument("--goal-variance", type=float, default=None,
+    p.add_argument("--goal-variance", type=positive_float, default=None,
                    help="with --commonroad: cells²; planning-time goal variance of risk-map planners "
                         "(default: the checkpoint's; see tune-goal-variance --goal)")
     p.add_argument("--commonroad", nargs="+", metavar="DIR_OR_FILE",

@@ -81,7 +81,7 @@ class EvalConfig:
                              "follows; use it with --mode log only")
         if self.episode_s is None:
             object.__setattr__(self, "episode_s", FAMILY_SETUPS[family].episode_s)
-        if not self.episode_s > 0:
+        if not 0 < self.episode_s < float("inf"):
             raise InputError(f"--episode-s must be positive seconds, got {self.episode_s}")
 
 

@@ -155,7 +155,7 @@ def evaluate_commonroad(recordings: list[str | Path], planners: tuple[str, ...],
 
     out = Path(out)
     ReplayConfig(goal=goal, mode=mode)    # validates the goal and mode before any work
-    files = scenario_files(recordings)
+    files = scenario_files(recordings, flag="--commonroad")
     # The recording as it is (no smoothing); a vehicle recorded in several files of one traffic
     # configuration is one episode (the first file's).
     config = CommonRoadCollectConfig(files=(), smoothing_s=0.0)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from riskmap.infra.cli import comma_list, positive_int
+from riskmap.infra.cli import comma_list, positive_float, positive_int
 
 
 def _cmd_figures_scenes(args: argparse.Namespace) -> int:
@@ -43,6 +43,6 @@ def add_parsers(sub) -> None:
                    help="recorded data: only windows of these configurations (names or numbers)")
     q.add_argument("--goal", choices=("route", "human"), default="route",
                    help="plan towards the route rule's goal or the human's end (as evaluate --goal)")
-    q.add_argument("--goal-variance", type=float, default=None,
+    q.add_argument("--goal-variance", type=positive_float, default=None,
                    help="cells²; planning-time goal variance (default: the checkpoint's)")
     q.set_defaults(func=_cmd_figures_plans)

@@ -28,3 +28,14 @@ class GuardTrainConfig:
     batch_size: int = 8
     seed: int = 0
     model: TGATConfig = field(default_factory=TGATConfig)
+
+    def __post_init__(self) -> None:
+        import math
+
+        from rasterize.errors import InputError
+
+        if not (math.isfinite(self.lr) and self.lr > 0):
+            raise InputError(f"--lr {self.lr}: must be a positive number")
+        for name in ("epochs", "patience", "batch_size"):
+            if getattr(self, name) < 1:
+                raise InputError(f"--{name.replace('_', '-')} {getattr(self, name)}: must be at least 1")

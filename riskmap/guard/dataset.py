@@ -50,6 +50,27 @@ class GuardCollectConfig:
     max_ds_m: float = 50.0            # farther pairs are not interactions
     negatives_per_episode: int = 24
 
+    def __post_init__(self) -> None:
+        """Bad settings stop here, before `collect` claims --out."""
+        import math
+
+        from rasterize.config import family_of_env
+
+        object.__setattr__(self, "seen_envs", tuple(self.seen_envs))
+        object.__setattr__(self, "unseen_envs", tuple(self.unseen_envs))
+        if not self.seen_envs:
+            raise InputError("--seen-envs is empty; name at least one scenario family, e.g. highway-v0")
+        for env_id in self.seen_envs + self.unseen_envs:
+            family_of_env(env_id)          # an InputError naming the supported ids
+        for name in ("train_episodes", "seen_test_episodes", "unseen_episodes", "planner_every",
+                     "control_hz"):
+            if getattr(self, name) < 1:
+                raise InputError(f"{name} {getattr(self, name)}: must be at least 1")
+        if not (math.isfinite(self.episode_s) and self.episode_s > 0):
+            raise InputError(f"--episode-s {self.episode_s}: must be a positive number of seconds")
+        if not 0 <= self.val_fraction < 1:
+            raise InputError(f"val_fraction {self.val_fraction}: must be in [0, 1)")
+
 
 @dataclass(frozen=True)
 class Job:
@@ -180,9 +201,11 @@ def collect(config: GuardCollectConfig, out: Path, resume: bool = False, progres
             continue
         if job.env_id not in envs:
             envs[job.env_id] = make_env(job.env_id, config.control_hz)
-        if job.driver not in planners:
-            planners[job.driver] = make_planner(job.driver, seed=job.seed)
-        windows, meta = run_job(job, config, envs[job.env_id], planners[job.driver])
+        # One planner per driver and seed: a job's episode is its own, whichever jobs this
+        # process ran before it (a resumed run starts further on).
+        if (job.driver, job.seed) not in planners:
+            planners[job.driver, job.seed] = make_planner(job.driver, seed=job.seed)
+        windows, meta = run_job(job, config, envs[job.env_id], planners[job.driver, job.seed])
         write_npz(path, windows)
         write_json(meta_path, meta)
         metas.append(meta)
@@ -202,12 +225,44 @@ def split_counts(metas: list[dict]) -> dict:
     return counts
 
 
+WINDOW_KEYS = ("node_u", "node_i", "edge", "mask", "label")
+
+
+def load_job(path: Path) -> dict[str, np.ndarray]:
+    """The windows of one job file; a damaged one (unreadable, lacking arrays, NaN or inf
+    features) is an InputError naming it."""
+    import zipfile
+
+    fix = ("delete it (and its .json) and write it again: `riskmap guard collect --resume`, or "
+           "`adversary guard-data --resume` for attack windows")
+    try:
+        with np.load(path) as data:
+            arrays = {key: data[key] for key in data.files}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
+        raise InputError(f"guard windows {path} are corrupt or truncated ({type(err).__name__}); "
+                         f"{fix}") from None
+    missing = [key for key in WINDOW_KEYS if key not in arrays]
+    if missing:
+        raise InputError(f"guard windows {path} lack {', '.join(missing)}; {fix}")
+    for key in ("node_u", "node_i", "edge"):
+        if not np.isfinite(arrays[key]).all():
+            raise InputError(f"guard windows {path} hold NaN/inf in {key}; {fix}")
+    return arrays
+
+
 def load_split(data: Path, split: str) -> dict[str, np.ndarray]:
     """All windows of `split` concatenated (keys as `extract_windows`, plus `job` indices)."""
+    if not Path(data).is_dir():
+        raise InputError(f"--data {data} is not a guard dataset directory; make one with "
+                         f"`riskmap guard collect --out {data}`")
     paths = sorted((Path(data) / "jobs").glob(f"{split}_*.npz"))
     if not paths:
+        there = sorted({p.name.split("_", 1)[0] for p in (Path(data) / "jobs").glob("*_*.npz")})
+        if there:
+            raise InputError(f"no {split!r} windows under {data}/jobs; use one of the splits there: "
+                             f"{', '.join(there)}")
         raise InputError(f"no {split!r} windows under {data}/jobs; run `riskmap guard collect --out {data}`")
-    parts = [dict(np.load(p)) for p in paths]
+    parts = [load_job(p) for p in paths]
     merged = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
     merged["job"] = np.concatenate([np.full(len(p["label"]), j) for j, p in enumerate(parts)])
     return merged

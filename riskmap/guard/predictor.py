@@ -2,13 +2,11 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from rasterize.errors import InputError
 from riskmap.guard.features import window_features
 from riskmap.guard.tgat import TGAT, TGATConfig
 
@@ -21,21 +19,11 @@ class AccidentPredictor:
 
     @classmethod
     def load(cls, path: str | Path) -> AccidentPredictor:
-        from safetensors.torch import load_file
+        from riskmap.infra.checkpoint import load_weights, read_sidecar
 
-        path = Path(path)
-        weights, sidecar = path.with_suffix(".safetensors"), path.with_suffix(".json")
-        if not weights.exists() or not sidecar.exists():
-            raise InputError(f"guard checkpoint {path} not found (need {weights.name} and {sidecar.name}); "
-                             "train one with `riskmap guard train` or use checkpoints/guard_tgat")
-        side = json.loads(sidecar.read_text())
-        if side.get("kind") != CHECKPOINT_KIND:
-            raise InputError(f"{sidecar} is not a guard TGAT checkpoint (kind={side.get('kind')})")
-        model = TGAT(TGATConfig(**side["model"]))
-        try:
-            model.load_state_dict(load_file(str(weights)))
-        except (RuntimeError, OSError) as err:
-            raise InputError(f"guard checkpoint {path} does not match its config ({err})") from None
+        side = read_sidecar(Path(path), kind=CHECKPOINT_KIND)   # missing, damaged, other kind
+        model = load_weights(TGAT(TGATConfig(**side["model"])), Path(path),
+                             "train it again with `riskmap guard train` or use checkpoints/guard_tgat")
         return cls(model, side.get("alert_threshold", 0.6))
 
     @torch.no_grad()

@@ -2,13 +2,14 @@
 
 BCE with logits, Adam (4e-4), batch 8. After every epoch the whole validation, seen-test and
 unseen-test splits are scored in one pass each (metrics over the whole split, not averaged per
-batch). Run directory: state.pt (resumable, atomic), history.json, best.safetensors + best.json,
-curves.png.
+batch). Run directory: state.pt (everything --resume needs, written whole after every epoch: the
+epoch's one commit point), then from it history.json and, when the epoch is the best so far,
+best.safetensors + best.json (a resumed run writes them again from its state: the kill may have
+come between them); at the end curves.png and result.json.
 """
 
 from __future__ import annotations
 
-import io
 import json
 from dataclasses import asdict
 from pathlib import Path
@@ -22,8 +23,8 @@ from riskmap.guard.config import GuardTrainConfig
 from riskmap.guard.dataset import load_split
 from riskmap.guard.metrics import binary_metrics
 from riskmap.guard.tgat import TGAT
-from riskmap.infra.atomic import atomic_write, write_json
-from riskmap.infra.checkpoint import save_checkpoint
+from riskmap.infra.atomic import write_json
+from riskmap.infra.checkpoint import load_state, save_checkpoint, save_state
 from riskmap.infra.rundir import lock_out_dir, refuse_unless_resume
 
 CHECKPOINT_KIND = "guard_tgat"
@@ -52,26 +53,31 @@ def evaluate(model: nn.Module, tensors: tuple[torch.Tensor, ...]) -> dict:
             "at_alert_threshold": binary_metrics(labels, probs, ALERT_THRESHOLD)}
 
 
-def _save_state(path: Path, state: dict) -> None:
-    buffer = io.BytesIO()
-    torch.save(state, buffer)
-    atomic_write(path, lambda f: f.write(buffer.getvalue()))
-
-
 def train(data: Path, out: Path, config: GuardTrainConfig = GuardTrainConfig(), resume: bool = False,
           progress: bool = True) -> dict:
     out = Path(out)
     state_path = out / "state.pt"
     refuse_unless_resume(out, "a guard training run", "state.pt", resume)
-    lock_out_dir(out)   # one writer per run directory (creates it)
     torch.manual_seed(config.seed)
+    # The data is read (and bad data refused) before --out exists.
     splits = {name: _tensors(load_split(data, name)) for name in ("train", "val", "seen", "unseen")}
+    lock_out_dir(out)   # one writer per run directory (creates it)
     model = TGAT(config.model)
     optimiser = torch.optim.Adam(model.parameters(), lr=config.lr)
     loss_fn = nn.BCEWithLogitsLoss()
     history, best, epoch0 = [], {"val_ap": -1.0, "epoch": None}, 0
+
+    def publish(epoch: int, history: list[dict], best: dict) -> None:
+        """The files derived from the state committed after `epoch`."""
+        if best["epoch"] == epoch:
+            save_checkpoint(out / "best.safetensors", model, {
+                "kind": CHECKPOINT_KIND, "model": config.model.to_dict(), "train": asdict(config),
+                "alert_threshold": ALERT_THRESHOLD, "data": str(data), "epoch": epoch,
+                "metrics": {k: history[-1][k] for k in ("val", "seen", "unseen")}})
+        write_json(out / "history.json", history)
+
     if resume and state_path.exists():
-        state = torch.load(state_path, weights_only=False)
+        state = load_state(state_path)
         # More epochs (or patience) may be asked for on resume; everything else must match.
         if state["config"] | {"epochs": config.epochs, "patience": config.patience} != asdict(config):
             raise InputError(f"--out {out} was trained with other settings; choose another --out")
@@ -79,6 +85,7 @@ def train(data: Path, out: Path, config: GuardTrainConfig = GuardTrainConfig(), 
         optimiser.load_state_dict(state["optimiser"])
         torch.set_rng_state(state["rng"])
         history, best, epoch0 = state["history"], state["best"], state["epoch"] + 1
+        publish(state["epoch"], history, best)
     n_train = len(splits["train"][0])
     for epoch in range(epoch0, config.epochs):
         if epoch - (best["epoch"] if best["epoch"] is not None else -1) > config.patience:
@@ -99,14 +106,10 @@ def train(data: Path, out: Path, config: GuardTrainConfig = GuardTrainConfig(), 
         history.append(row)
         if row["val"]["ap"] > best["val_ap"]:
             best = {"val_ap": row["val"]["ap"], "epoch": epoch}
-            save_checkpoint(out / "best.safetensors", model, {
-                "kind": CHECKPOINT_KIND, "model": config.model.to_dict(), "train": asdict(config),
-                "alert_threshold": ALERT_THRESHOLD, "data": str(data), "epoch": epoch,
-                "metrics": {k: row[k] for k in ("val", "seen", "unseen")}})
-        _save_state(state_path, {"config": asdict(config), "model": model.state_dict(),
-                                 "optimiser": optimiser.state_dict(), "rng": torch.get_rng_state(),
-                                 "history": history, "best": best, "epoch": epoch})
-        write_json(out / "history.json", history)
+        save_state(state_path, {"config": asdict(config), "model": model.state_dict(),
+                                "optimiser": optimiser.state_dict(), "rng": torch.get_rng_state(),
+                                "history": history, "best": best, "epoch": epoch})
+        publish(epoch, history, best)
         if progress:
             print(f"epoch {epoch}: loss {row['train_loss']:.4f} val AP {row['val']['ap']:.3f} "
                   f"seen AP {row['seen']['ap']:.3f} unseen AP {row['unseen']['ap']:.3f}", flush=True)

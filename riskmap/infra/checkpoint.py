@@ -1,7 +1,9 @@
-"""Checkpoints: safetensors weights plus a JSON sidecar with every config and the metrics."""
+"""Checkpoints: safetensors weights plus a JSON sidecar with every config and the metrics; and
+the resume state of a training run (`save_state`/`load_state`)."""
 
 from __future__ import annotations
 
+import io
 import json
 from pathlib import Path
 
@@ -28,32 +30,100 @@ def save_checkpoint(path: Path, model: torch.nn.Module, sidecar: dict,
     return path
 
 
+def save_state(path: Path, state: dict) -> None:
+    """Write a training run's resume state (tensors and plain values: weights, optimizer, epoch,
+    log) in one atomic write, so that it is the run's one commit point per epoch: a run killed
+    anywhere resumes from the last state written whole, and the files derived from it (log,
+    checkpoints) are written again from it."""
+    buffer = io.BytesIO()
+    torch.save(state, buffer)
+    atomic_write(path, lambda f: f.write(buffer.getvalue()))
+
+
+def load_state(path: Path) -> dict:
+    """A resume state written by `save_state`; an unreadable one is an InputError."""
+    import pickle
+
+    try:
+        return torch.load(path, weights_only=True)
+    except (OSError, RuntimeError, EOFError, ValueError, pickle.UnpicklingError) as err:
+        raise InputError(f"{path} is unreadable ({type(err).__name__}); delete {Path(path).parent} "
+                         "and start again") from None
+
+
+# What a checkpoint of each kind holds and the command that makes one (for messages).
+KINDS = {
+    "riskmap": ("risk-map planner", "`riskmap train`"),
+    "bc": ("behaviour-cloning baseline", "`riskmap train-baseline`"),
+    "guard_tgat": ("guard (TGAT)", "`riskmap guard train`"),
+    "traffic_cvae": ("CRASH traffic model", "`adversary train-traffic`"),
+    "crash_selector": ("CRASH selector", "`adversary train-selector`"),
+}
+
+
+def kind_words(kind) -> tuple[str, str]:
+    """(what a `kind` checkpoint is, the command that trains one), for messages."""
+    return KINDS.get(kind, (f"{kind!r}", "the command that trains it"))
+
+
 def read_sidecar(path: Path, kind: str = CHECKPOINT_KIND) -> dict:
+    """The JSON sidecar of checkpoint `path` (without suffix), which must be of `kind`; anything
+    else (missing, unreadable, of no or another kind) is an InputError naming the path."""
     path = Path(path)
     weights = path.with_suffix(".safetensors")
     sidecar = path.with_suffix(".json")
-    if not weights.exists() or not sidecar.exists():
+    what, made_by = kind_words(kind)
+    fix = f"pass a {what} checkpoint from {made_by}"
+    if not weights.is_file() or not sidecar.is_file():
         raise InputError(f"checkpoint {path} not found (need {weights.name} and {sidecar.name}); "
-                         "train one with `riskmap train` or pass a path under checkpoints/")
+                         f"train one with {made_by} or pass a path under checkpoints/")
     try:
         data = json.loads(sidecar.read_text())
-    except ValueError:
-        raise InputError(f"{sidecar} is not valid JSON; the checkpoint is damaged") from None
-    if not isinstance(data, dict) or "kind" not in data:
-        raise InputError(f"{sidecar} is not a checkpoint sidecar (it names no kind); pass the .json "
-                         "that training wrote beside the .safetensors")
+    except (OSError, ValueError):
+        raise InputError(f"{sidecar} is not valid JSON (damaged, or not a checkpoint sidecar); "
+                         f"{fix}") from None
+    if not isinstance(data, dict) or data.get("kind") is None:
+        raise InputError(f"{sidecar} is not a checkpoint sidecar (it names no kind); {fix} (the "
+                         ".json that training wrote beside the .safetensors)")
     if data["kind"] != kind:
-        raise InputError(f"{sidecar} is a {data['kind']!r} checkpoint, not {kind!r}; pass a "
-                         "checkpoint made for this planner")
+        theirs = kind_words(data["kind"])[0]
+        raise InputError(f"checkpoint {path} is a {theirs} checkpoint (kind {data['kind']!r}), not "
+                         f"a {what} one; {fix}")
     return data
 
 
-def load_weights(model: torch.nn.Module, path: Path, fix: str) -> torch.nn.Module:
-    """Load `path`.safetensors into `model` (eval mode); a mismatch is an InputError ending in `fix`."""
+def load_tensors(path: Path) -> dict[str, torch.Tensor]:
+    """The tensors of checkpoint `path` (.safetensors); unreadable weights, or weights with NaN or
+    inf in them, are an InputError naming the file."""
+    from safetensors import SafetensorError
+
+    weights = Path(path).with_suffix(".safetensors")
     try:
-        model.load_state_dict(load_file(str(Path(path).with_suffix(".safetensors"))))
+        state = load_file(str(weights))
+    except (SafetensorError, OSError, ValueError, RuntimeError) as err:
+        reason = (str(err).splitlines() or [type(err).__name__])[0][:200]
+        raise InputError(f"checkpoint weights {weights} are unreadable ({reason}); the file is "
+                         "truncated or not a .safetensors checkpoint: pass another checkpoint or "
+                         "train it again") from None
+    bad = [name for name, tensor in state.items()
+           if tensor.is_floating_point() and not bool(torch.isfinite(tensor).all())]
+    if bad:
+        more = f" and {len(bad) - 1} more" if len(bad) > 1 else ""
+        raise InputError(f"checkpoint weights {weights} hold NaN or inf (in {bad[0]}{more}); the "
+                         "run that wrote them diverged or the file is damaged: pass another "
+                         "checkpoint or train it again") from None
+    return state
+
+
+def load_weights(model: torch.nn.Module, path: Path, fix: str) -> torch.nn.Module:
+    """Load `path`.safetensors into `model` (eval mode); unreadable or non-finite weights are an
+    InputError (`load_tensors`), a mismatch one ending in `fix`."""
+    state = load_tensors(path)
+    try:
+        model.load_state_dict(state)
     except (RuntimeError, OSError) as err:
-        raise InputError(f"checkpoint {path} does not match its config ({err}); {fix}") from None
+        reason = " ".join(str(err).split())[:300]          # one line, however long the list
+        raise InputError(f"checkpoint {path} does not match its config ({reason}); {fix}") from None
     return model.eval()
 
 

@@ -24,25 +24,73 @@ def positive_int(text: str) -> int:
     return value
 
 
+def positive_float(text: str) -> float:
+    """A finite number > 0 (NaN, inf, zero and negatives are refused by argparse)."""
+    import math
+
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"{text} must be a finite number > 0")
+    return value
+
+
+def non_negative_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not an integer") from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{value} must be 0 or more")
+    return value
+
+
+def _command_name(args: argparse.Namespace) -> str:
+    """The command as typed: `collect`, `guard train`, `figures plans`."""
+    words = (getattr(args, name, None) for name in ("command", "guard_command", "figure"))
+    return " ".join(w for w in words if isinstance(w, str) and w)
+
+
+def _file_in_the_way(path) -> str | None:
+    """The regular file standing where `path` or one of its parent folders should be, if any."""
+    from pathlib import Path
+
+    for p in (Path(path), *Path(path).parents):
+        try:
+            if p.is_file():
+                return str(p)
+        except OSError:
+            return None
+    return None
+
+
 def run_command(prog: str, parser: argparse.ArgumentParser, argv: list[str] | None) -> int:
     """Parse `argv`, run the chosen handler (`args.func`) and turn bad input into one line."""
     args = parser.parse_args(argv)
     try:
         return args.func(args)
     except InputError as err:
-        command = getattr(args, "command", None)
-        print(f"{prog}{' ' + command if command else ''}: error: {err}", file=sys.stderr)
+        command = _command_name(args)
+        message = " ".join(str(err).split("\n"))          # one line, whatever the message
+        print(f"{prog}{' ' + command if command else ''}: error: {message}", file=sys.stderr)
         return 2
     except OSError as err:
         # A path the system refused (missing parent, no permission, read-only or full disk):
         # one line naming it, not a traceback.
-        command = getattr(args, "command", None)
+        command = _command_name(args)
         where = f"{err.filename}: " if err.filename else ""
+        reason = err.strerror or str(err)
+        blocker = (_file_in_the_way(err.filename) if err.filename
+                   and err.errno in (errno.EEXIST, errno.ENOTDIR) else None)
+        if blocker is not None:
+            reason = f"{blocker} is a file, not a folder"
         if err.errno in (errno.ENOSPC, errno.EDQUOT):
             fix = "free some space and rerun with --resume (finished work is kept)"
         else:
             fix = "check that the path exists and that you may write there"
-        print(f"{prog}{' ' + command if command else ''}: error: {where}{err.strerror or err}; "
+        print(f"{prog}{' ' + command if command else ''}: error: {where}{reason}; "
               f"{fix}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -28,8 +28,10 @@ def _scalar(value: Any, type_name: str, where: str):
         return float(value)
     if type_name == "str" and isinstance(value, str) and value:
         return value
-    raise InputError(f"{where}: expected {'a non-empty string' if type_name == 'str' else type_name}, "
-                     f"got {value!r}")
+    kind = {"str": "a non-empty string", "int": "an int"}.get(type_name, f"a {type_name}")
+    shown = repr(value) if len(repr(value)) <= 80 else repr(value)[:77] + "..."
+    raise InputError(f"{where}: expected {kind[kind.index(' ') + 1:] if type_name != 'str' else kind}, "
+                     f"got {shown}; change it to {kind}")
 
 
 def from_mapping(cls, data: Any, where: str):
@@ -37,18 +39,21 @@ def from_mapping(cls, data: Any, where: str):
     if data is None:
         data = {}
     if not isinstance(data, dict):
-        raise InputError(f"{where}: expected a mapping of {cls.__name__} fields, got {data!r}")
+        shown = repr(data) if len(repr(data)) <= 80 else repr(data)[:77] + "..."
+        raise InputError(f"{where}: expected a mapping of {cls.__name__} fields (key: value lines), "
+                         f"got {shown}; write one key per line")
     hints = typing.get_type_hints(cls)
     fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
     unknown = sorted(set(data) - set(fields))
     if unknown:
-        raise InputError(f"{where}: unknown key {unknown[0]!r}; allowed keys: {', '.join(fields)}")
+        raise InputError(f"{where}: unknown key {unknown[0]!r}; remove it or use one of the allowed "
+                         f"keys: {', '.join(fields)}")
     values = {}
     for name, f in fields.items():
         key_where = f"{where}.{name}"
         if name not in data:
             if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
-                raise InputError(f"{where}: missing required key {name!r}")
+                raise InputError(f"{where}: missing required key {name!r}; add it")
             continue
         values[name] = _convert(data[name], hints[name], key_where)
     return cls(**values)

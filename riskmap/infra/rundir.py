@@ -51,11 +51,36 @@ def _without(settings: dict, keys: tuple[str, ...]) -> dict:
 
 
 def refuse_unless_resume(out: Path, holds: str, marker: str | None, resume: bool) -> None:
-    """Stop when `out/marker` (or `out` itself, marker None) already holds work and not `resume`."""
+    """Stop when `out/marker` (or `out` itself, marker None) already holds work and not `resume`,
+    or when another run is writing `out` right now (`refuse_if_locked`)."""
     out = Path(out)
     if not resume and holds_work(out / marker if marker else out):
         raise InputError(f"--out {out} already holds {holds}; pass --resume to continue or choose "
                          "another --out")
+    refuse_if_locked(out)
+
+
+def refuse_if_locked(out: Path) -> None:
+    """InputError when another process holds `out`'s lock, checked without creating anything:
+    a command checks this first, validates its inputs, and only then makes and locks `out`
+    (`lock_out_dir`), so that bad input leaves no --out behind."""
+    import fcntl
+    import os
+
+    lock = Path(out) / LOCK_FILE
+    if Path(out).resolve() in _HELD or not lock.is_file():
+        return
+    try:
+        fd = os.open(lock, os.O_RDONLY)
+    except OSError:
+        return                       # unreadable: lock_out_dir will say why
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        raise InputError(f"--out {out} is being written by another run right now; wait for it to "
+                         "finish or choose another --out") from None
+    finally:
+        os.close(fd)                 # closing drops the probe's own lock
 
 
 def check_same_settings(out: Path, settings_file: str, settings: dict,

@@ -154,17 +154,12 @@ def bc_inputs(scene: Scene, config: BCConfig, raster: RasterConfig) -> tuple[np.
 
 def load_bc(path: str | Path) -> tuple[BCNet, dict]:
     """A trained baseline network (eval mode) and its sidecar."""
-    from safetensors.torch import load_file
-
-    from riskmap.infra.checkpoint import read_sidecar
+    from riskmap.infra.checkpoint import load_weights, read_sidecar
 
     side = read_sidecar(Path(path), kind=CHECKPOINT_KIND)
-    model = BCNet(BCConfig(**side["bc"]))
-    try:
-        model.load_state_dict(load_file(str(Path(path).with_suffix(".safetensors"))))
-    except (RuntimeError, OSError) as err:
-        raise InputError(f"checkpoint {path} does not match its baseline config ({err})") from None
-    return model.eval(), side
+    model = load_weights(BCNet(BCConfig(**side["bc"])), Path(path),
+                         "train it again with `riskmap train-baseline`")
+    return model, side
 
 
 class BCPlanner:

@@ -96,12 +96,20 @@ def load_backbone_weights(model: RiskMapGenerator, path: str | Path) -> None:
     if not path.exists():
         raise InputError(f"--backbone-weights {path} does not exist; pass a local ResNet-34 "
                          "state dict (.pth or .safetensors)")
-    if path.suffix == ".safetensors":
-        from safetensors.torch import load_file
+    try:
+        if path.suffix == ".safetensors":
+            from safetensors.torch import load_file
 
-        state = load_file(str(path))
-    else:
-        state = torch.load(path, map_location="cpu", weights_only=True)
+            state = load_file(str(path))
+        else:
+            state = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as err:  # noqa: BLE001 - torch.load and safetensors raise many kinds
+        reason = (str(err).splitlines() or [type(err).__name__])[0][:160]
+        raise InputError(f"--backbone-weights {path} is not a readable state dict ({reason}); pass "
+                         "a local torchvision ResNet-34 state dict (.pth or .safetensors)") from None
+    if not isinstance(state, dict):
+        raise InputError(f"--backbone-weights {path} holds a {type(state).__name__}, not a state "
+                         "dict; pass a local torchvision ResNet-34 state dict")
     wanted = {"conv1.weight": "0.weight", "bn1.weight": "1.weight", "bn1.bias": "1.bias",
               "bn1.running_mean": "1.running_mean", "bn1.running_var": "1.running_var"}
     mapped = {}

@@ -3,10 +3,23 @@ them: `riskmap.infra.cli.add_config_options`)."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from rasterize.config import check_predict_s
 from rasterize.errors import InputError
+
+
+def check_device(name: str) -> None:
+    """InputError unless `name` is auto or a device torch knows (cpu, cuda, cuda:1, ...)."""
+    if name in ("auto", "cpu"):
+        return
+    import torch
+
+    try:
+        torch.device(name)
+    except (RuntimeError, ValueError):
+        raise InputError(f"--device {name!r} is not a device; use auto, cpu or cuda[:N]") from None
 
 
 def _normalise_kind(kind: str) -> str:
@@ -60,8 +73,16 @@ class TrainConfig:
             raise InputError(f"--workers must be 0 or more, got {self.workers}")
         if not self.cache:
             raise InputError("--cache must be auto, off or a folder")
-        if self.goal_variance is not None and not self.goal_variance > 0:
+        if self.goal_variance is not None and not 0 < self.goal_variance < math.inf:
             raise InputError(f"--goal-variance must be positive (cells²), got {self.goal_variance}")
+        for name in ("lr", "sigma_x", "sigma_y"):
+            if not 0 < getattr(self, name) < math.inf:
+                raise InputError(f"--{name.replace('_', '-')} must be a positive number, got "
+                                 f"{getattr(self, name)}")
+        if not math.isfinite(self.uncertainty_weight) or self.uncertainty_weight < 0:
+            raise InputError(f"--uncertainty-weight must be a finite number >= 0, got "
+                             f"{self.uncertainty_weight}")
+        check_device(self.device)
         for name in ("epochs", "batch_size", "resolution"):
             if getattr(self, name) < 1:
                 raise InputError(f"--{name.replace('_', '-')} must be positive")
@@ -100,6 +121,8 @@ class BaselineTrainConfig:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "kind", _normalise_kind(self.kind))
+        if not 0 < self.lr < math.inf:
+            raise InputError(f"--lr must be a positive number, got {self.lr}")
         if self.val_groups is not None:
             object.__setattr__(self, "val_groups", tuple(self.val_groups))
         if self.predict_s is not None:

@@ -2,8 +2,9 @@
 
 Every epoch: a pass over the training episodes in a seeded order, then validation on held-out
 episodes (demonstration NLL under the policy; ADE/FDE of the sampled plan against the recorded
-future on a fixed subset). Writes RUN/log.csv, TensorBoard scalars in RUN/tb/, RUN/last.* (for
---resume: weights, optimizer and progress) and RUN/best.* (lowest validation ADE).
+future on a fixed subset). Writes RUN/state.pt (everything --resume needs, the epoch's one commit
+point: `riskmap.training.progress`), then from it RUN/log.csv, RUN/last.* and RUN/best.* (lowest
+validation ADE); TensorBoard scalars in RUN/tb/.
 
 Windows served as recorded (validation, and training windows whose ego this epoch leaves
 unperturbed) come from the sample cache (`riskmap.data.sample_cache`) once built; `workers`
@@ -14,7 +15,6 @@ channels-last memory layout (the same computation up to rounding, faster convolu
 
 from __future__ import annotations
 
-import csv
 import math
 import os
 import sys
@@ -32,14 +32,20 @@ from rasterize.raster import channels
 from riskmap.data.dataset import DemoDataset, PerturbedEgo, collected_raster_config
 from riskmap.data.groups import dataset_groups, match_groups, natural_key
 from riskmap.data.sample_cache import open_sample_cache
-from riskmap.infra.atomic import atomic_write
-from riskmap.infra.checkpoint import read_sidecar, save_checkpoint
+from riskmap.infra.checkpoint import CHECKPOINT_KIND, save_checkpoint
 from riskmap.infra.config_mapping import to_plain
-from riskmap.infra.rundir import lock_out_dir, refuse_unless_resume
+from riskmap.infra.rundir import lock_out_dir
 from riskmap.planner.irl import demo_negative_log_likelihood, irl_step
 from riskmap.planner.model import ModelConfig, RiskMapGenerator, load_backbone_weights
 from riskmap.planner.sampler import SamplerConfig, sample_trajectory
 from riskmap.training.config import TrainConfig
+from riskmap.training.progress import (
+    commit,
+    read_progress,
+    refuse_unless_resume_run,
+    restore,
+    write_log,
+)
 
 
 def resolve_device(name: str) -> torch.device:
@@ -273,7 +279,7 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True, on_e
     from tqdm import tqdm
 
     out = Path(config.out)
-    refuse_unless_resume(out, "a training run", "last.json", resume)
+    refuse_unless_resume_run(out, resume)
     device = resolve_device(config.device)
     torch.manual_seed(config.seed)
     dataset = DemoDataset(config.data, config.resolution,
@@ -300,29 +306,33 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True, on_e
     if channels_last:
         model.to(memory_format=torch.channels_last)
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr)
-    start_epoch, best = 0, {"val_ade_m": math.inf}
-    if resume and (out / "last.json").exists():
-        previous = read_sidecar(out / "last")
-        if not same_settings(previous["train"], config):
+    start_epoch, best, rows = 0, {"val_ade_m": math.inf}, []
+    state = read_progress(out, CHECKPOINT_KIND) if resume else None
+    if state is not None:
+        if not same_settings(state["train"], config):
             raise InputError(f"--out {out} was trained with other settings; resume with the same "
                              "flags (only --epochs may change) or choose another --out")
-        from safetensors.torch import load_file
-
-        model.load_state_dict(load_file(str(out / "last.safetensors")))
-        optimizer.load_state_dict(torch.load(out / "last_optimizer.pt", weights_only=True))
-        start_epoch = previous["epoch"] + 1
-        best = previous["best"]
+        restore(state, model, optimizer)
+        start_epoch, best, rows = state["epoch"] + 1, state["best"], state["log"]
     lock_out_dir(out)   # one writer per run directory (creates it)
     attach_sample_cache(dataset, config, out, progress)
     data = dataset_sidecar(dataset, train_idx, val_idx)
     writer = SummaryWriter(str(out / "tb"), purge_step=start_epoch)
     workers = sample_workers(config.workers, device)
     val_loader = _loader(Subset(dataset, val_idx), config.batch_size, workers)
-    log_path = out / "log.csv"
     fields = ["epoch", "train_loss", "train_nll", "val_nll", "val_ade_m", "val_fde_m", "seconds"]
-    if start_epoch == 0:
-        log_path.write_text(",".join(fields) + "\n")
 
+    def publish(epoch: int, rows: list[dict], best: dict) -> None:
+        """The files derived from the state committed after `epoch`."""
+        write_log(out / "log.csv", fields, rows)
+        metrics = {k: v for k, v in rows[-1].items() if k != "epoch"}
+        sidecar = _sidecar(config, model_config, dataset, irl, data, metrics, epoch) | {"best": best}
+        if best.get("epoch") == epoch:
+            save_checkpoint(out / "best", model, sidecar)
+        save_checkpoint(out / "last", model, sidecar)
+
+    if state is not None:
+        publish(state["epoch"], rows, best)     # the run may have been killed between them
     for epoch in range(start_epoch, config.epochs):
         started = time.perf_counter()
         model.train()
@@ -361,16 +371,12 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True, on_e
         metrics["seconds"] = round(time.perf_counter() - started, 1)
         for key, value in metrics.items():
             writer.add_scalar(key, value, epoch)
-        with log_path.open("a", newline="") as f:
-            csv.DictWriter(f, fields).writerow({"epoch": epoch, **metrics})
+        writer.flush()   # on disk before the commit: a resumed run purges only later epochs
+        rows = rows + [{"epoch": epoch, **metrics}]
         if metrics["val_ade_m"] < best["val_ade_m"]:
             best = {"epoch": epoch, **metrics}
-            save_checkpoint(out / "best", model, _sidecar(config, model_config, dataset, irl, data, metrics, epoch)
-                            | {"best": best})
-        # Progress last, so that a run killed mid-save resumes from the previous epoch.
-        atomic_write(out / "last_optimizer.pt", lambda f: torch.save(optimizer.state_dict(), f))
-        save_checkpoint(out / "last", model,
-                        _sidecar(config, model_config, dataset, irl, data, metrics, epoch) | {"best": best})
+        commit(out, model, optimizer, epoch, best, rows, to_plain(config))
+        publish(epoch, rows, best)
         if progress:
             print(f"epoch {epoch + 1}/{config.epochs}: " +
                   ", ".join(f"{k} {v:.3f}" for k, v in metrics.items()), flush=True)

@@ -2,13 +2,13 @@
 
 Same demonstrations, same episode split (`riskmap.training.train.split_episodes`) and the same ego-pose
 augmentation as the risk-map planner's training; the loss is the mean L2 distance between the
-predicted and the recorded 12 waypoints (ADE). Writes RUN/log.csv, RUN/last.* (weights,
-optimizer, progress: for --resume) and RUN/best.* (lowest validation ADE).
+predicted and the recorded 12 waypoints (ADE). Writes RUN/state.pt (everything --resume needs,
+the epoch's one commit point: `riskmap.training.progress`), then from it RUN/log.csv, RUN/last.*
+and RUN/best.* (lowest validation ADE).
 """
 
 from __future__ import annotations
 
-import csv
 import math
 import time
 from dataclasses import asdict
@@ -22,11 +22,18 @@ from rasterize.errors import InputError
 from rasterize.frames import ego_from_world, ego_pose
 from rasterize.raster import channels
 from riskmap.data.dataset import DemoDataset, PerturbedEgo
-from riskmap.infra.atomic import atomic_write
-from riskmap.infra.checkpoint import read_sidecar, save_checkpoint
-from riskmap.infra.rundir import lock_out_dir, refuse_unless_resume
+from riskmap.infra.checkpoint import save_checkpoint
+from riskmap.infra.config_mapping import to_plain
+from riskmap.infra.rundir import lock_out_dir
 from riskmap.planner.bc import CHECKPOINT_KIND, BCConfig, BCNet, bc_inputs
 from riskmap.training.config import BaselineTrainConfig
+from riskmap.training.progress import (
+    commit,
+    read_progress,
+    refuse_unless_resume_run,
+    restore,
+    write_log,
+)
 from riskmap.training.train import (
     dataset_sidecar,
     raster_for,
@@ -91,7 +98,7 @@ def train_baseline(config: BaselineTrainConfig, resume: bool = False, progress: 
     from tqdm import tqdm
 
     out = Path(config.out)
-    refuse_unless_resume(out, "a training run", "last.json", resume)
+    refuse_unless_resume_run(out, resume)
     torch.manual_seed(config.seed)
     dataset = DemoDataset(config.data, raster=raster_for(config.data, config.predict_s))
     train_idx, val_idx = split_episodes(dataset, config.val_fraction, config.val_groups)
@@ -103,26 +110,32 @@ def train_baseline(config: BaselineTrainConfig, resume: bool = False, progress: 
                   goal_variance=resolve_goal_variance(None, dataset))
     model = BCNet(bc)
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr)
-    start_epoch, best = 0, {"val_ade_m": math.inf}
-    if resume and (out / "last.json").exists():
-        previous = read_sidecar(out / "last", kind=CHECKPOINT_KIND)
-        if not same_settings(previous["train"], config):
+    start_epoch, best, rows = 0, {"val_ade_m": math.inf}, []
+    state = read_progress(out, CHECKPOINT_KIND) if resume else None
+    if state is not None:
+        if not same_settings(state["train"], config):
             raise InputError(f"--out {out} was trained with other settings; resume with the same "
                              "flags (only --epochs may change) or choose another --out")
-        from safetensors.torch import load_file
-
-        model.load_state_dict(load_file(str(out / "last.safetensors")))
-        optimizer.load_state_dict(torch.load(out / "last_optimizer.pt", weights_only=True))
-        start_epoch, best = previous["epoch"] + 1, previous["best"]
+        restore(state, model, optimizer)
+        start_epoch, best, rows = state["epoch"] + 1, state["best"], state["log"]
     lock_out_dir(out)   # one writer per run directory (creates it)
     data = dataset_sidecar(dataset, train_idx, val_idx)
     augment = (config.augment_probability, config.augment_heading_deg, config.augment_lateral_m)
     train_set = BCWindows(dataset, bc, augment, config.seed)
     val_loader = DataLoader(Subset(BCWindows(dataset, bc, None), val_idx), batch_size=config.batch_size)
-    log_path = out / "log.csv"
     fields = ["epoch", "train_ade_m", "val_ade_m", "val_fde_m", "seconds"]
-    if start_epoch == 0:
-        log_path.write_text(",".join(fields) + "\n")
+
+    def publish(epoch: int, rows: list[dict], best: dict) -> None:
+        """The files derived from the state committed after `epoch`."""
+        write_log(out / "log.csv", fields, rows)
+        metrics = {k: v for k, v in rows[-1].items() if k != "epoch"}
+        sidecar = _sidecar(config, bc, dataset, data, metrics, epoch, best)
+        if best.get("epoch") == epoch:
+            save_checkpoint(out / "best", model, sidecar, kind=CHECKPOINT_KIND)
+        save_checkpoint(out / "last", model, sidecar, kind=CHECKPOINT_KIND)
+
+    if state is not None:
+        publish(state["epoch"], rows, best)     # the run may have been killed between them
     for epoch in range(start_epoch, config.epochs):
         started = time.perf_counter()
         model.train()
@@ -143,16 +156,11 @@ def train_baseline(config: BaselineTrainConfig, resume: bool = False, progress: 
             bar.set_postfix(ade=f"{np.mean(losses):.2f}")
         metrics = {"train_ade_m": float(np.mean(losses)), **_validate(model, val_loader)}
         metrics["seconds"] = round(time.perf_counter() - started, 1)
-        with log_path.open("a", newline="") as f:
-            csv.DictWriter(f, fields).writerow({"epoch": epoch, **metrics})
+        rows = rows + [{"epoch": epoch, **metrics}]
         if metrics["val_ade_m"] < best["val_ade_m"]:
             best = {"epoch": epoch, **metrics}
-            save_checkpoint(out / "best", model, _sidecar(config, bc, dataset, data, metrics, epoch, best),
-                            kind=CHECKPOINT_KIND)
-        # Progress last, so that a run killed mid-save resumes from the previous epoch.
-        atomic_write(out / "last_optimizer.pt", lambda f: torch.save(optimizer.state_dict(), f))
-        save_checkpoint(out / "last", model, _sidecar(config, bc, dataset, data, metrics, epoch, best),
-                        kind=CHECKPOINT_KIND)
+        commit(out, model, optimizer, epoch, best, rows, to_plain(config))
+        publish(epoch, rows, best)
         if progress:
             print(f"{config.kind} epoch {epoch + 1}/{config.epochs}: " +
                   ", ".join(f"{k} {v:.3f}" for k, v in metrics.items()), flush=True)

@@ -27,12 +27,12 @@ ROOT = Path(__file__).resolve().parents[2]
 IGNORED_NAMES = {".lock"}
 IGNORED_DIRS = {"tb", "cache", "__pycache__"}
 CLOCK_KEYS = {"started", "finished", "created", "time_s", "duration_s", "git_commit", "git_dirty",
-              "version"}
-CLOCK_WORDS = ("elapsed", "seconds", "wall", "timing")   # any key containing one is a clock
+              "version", "rollout_s"}
+CLOCK_WORDS = ("elapsed", "seconds", "wall", "timing", "plan_ms")   # any key containing one is a clock
 
 
-def _is_clock(key: str) -> bool:
-    return key in CLOCK_KEYS or any(word in key for word in CLOCK_WORDS)
+def _is_clock(key) -> bool:
+    return isinstance(key, str) and (key in CLOCK_KEYS or any(word in key for word in CLOCK_WORDS))
 
 
 def run_cli(argv: list[str], *, kill_at: str | None = None, write_log: Path | None = None,
@@ -54,7 +54,10 @@ KILL_POINTS = ("first", "middle", "last")
 
 def kill_point(name: str, writes: int) -> str:
     """A RISKMAP_KILL_AT value: "first" right after the first atomic write, "middle" mid-write
-    (temporary file complete, not renamed) halfway, "last" mid-write at the last write."""
+    (temporary file complete, not renamed) halfway, "last" mid-write at the last write; a
+    RISKMAP_KILL_AT value itself ("N" or "N:mid") is taken as it is."""
+    if name not in KILL_POINTS:
+        return name
     return {"first": "1", "middle": f"{max(writes // 2, 1)}:mid", "last": f"{writes}:mid"}[name]
 
 
@@ -66,15 +69,21 @@ def _strip_clock(value):
     return value
 
 
-def _content(path: Path):
-    """What must be equal in a file: parsed content for formats with clocks, bytes otherwise."""
+def _content(path: Path, out: Path | None = None):
+    """What must be equal in a file: parsed content for formats with clocks, bytes otherwise.
+    Text naming the output folder `out` itself (a run's settings record its --out) reads $OUT."""
     suffix = path.suffix
+    raw = path.read_bytes()
+    names = {str(out), str(Path(out).resolve())} if out is not None else set()
+    if suffix not in (".npz", ".pt"):
+        for name in names:
+            raw = raw.replace(name.encode(), b"$OUT")
     if suffix == ".json":
-        return _strip_clock(json.loads(path.read_text()))
+        return _strip_clock(json.loads(raw))
     if suffix == ".jsonl":
-        return [_strip_clock(json.loads(line)) for line in path.read_text().splitlines() if line]
+        return [_strip_clock(json.loads(line)) for line in raw.decode().splitlines() if line]
     if suffix == ".csv":
-        rows = list(csv.DictReader(io.StringIO(path.read_text())))
+        rows = list(csv.DictReader(io.StringIO(raw.decode())))
         return [{k: v for k, v in row.items() if not _is_clock(k)} for row in rows]
     if suffix == ".npz":
         with np.load(path, allow_pickle=False) as data:
@@ -83,19 +92,23 @@ def _content(path: Path):
     if suffix == ".pt":
         import torch
 
-        return _tensor_bytes(torch.load(path, weights_only=True))
-    return path.read_bytes()
+        return _strip_clock(_tensor_bytes(torch.load(path, weights_only=True), names))
+    return raw
 
 
-def _tensor_bytes(value):
+def _tensor_bytes(value, names=frozenset()):
+    """Tensors as bytes; strings naming the output folder (one of `names`) read $OUT."""
     import torch
 
     if isinstance(value, torch.Tensor):
         return value.detach().cpu().numpy().tobytes()
     if isinstance(value, dict):
-        return {k: _tensor_bytes(v) for k, v in value.items()}
+        return {k: _tensor_bytes(v, names) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_tensor_bytes(v) for v in value]
+        return [_tensor_bytes(v, names) for v in value]
+    if isinstance(value, str):
+        for name in names:
+            value = value.replace(name, "$OUT")
     return value
 
 
@@ -108,7 +121,7 @@ def snapshot(out: Path, ignore: set[str] = frozenset()) -> dict[str, object]:
         if not path.is_file() or path.name in IGNORED_NAMES | set(ignore) \
                 or any(part in IGNORED_DIRS for part in rel.parts):
             continue
-        result[str(rel)] = _content(path)
+        result[str(rel)] = _content(path, out)
     return result
 
 
@@ -128,12 +141,13 @@ class Reference:
         log = folder / "writes.log"
         done = run_cli(argv_for(folder / "reference", False), write_log=log)
         assert done.returncode == 0, done.stderr[-3000:]
-        self.writes = len(log.read_text().splitlines())
+        self.targets = log.read_text().splitlines()   # the files written, in order
+        self.writes = len(self.targets)
         assert self.writes >= 1, "the command made no atomic write; nothing to kill at"
         self.expected = snapshot(folder / "reference", self.ignore)
 
     def check_kill_and_resume(self, point: str, out: Path) -> None:
-        """Kill a run at `point` (a KILL_POINTS name), resume it until it finishes, and assert
+        """Kill a run at `point` (a KILL_POINTS name or a RISKMAP_KILL_AT value), resume it until it finishes, and assert
         its folder equals the uninterrupted one."""
         at = kill_point(point, self.writes)
         killed = run_cli(self.argv_for(out, False), kill_at=at)

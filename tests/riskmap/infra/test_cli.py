@@ -66,7 +66,8 @@ def test_a_refused_path_is_one_line_not_a_traceback(tmp_path, capsys):
 @pytest.mark.parametrize("content, words", [
     ('{"config": {}}', "not a checkpoint sidecar"),
     ("[1, 2]", "not a checkpoint sidecar"),
-    ('{"kind": "bc"}', "is a 'bc' checkpoint, not"),
+    ('{"kind": "bc"}', r"is a behaviour-cloning baseline checkpoint \(kind 'bc'\), not a risk-map"),
+    ('{"kind": null}', "not a checkpoint sidecar"),
 ])
 def test_a_sidecar_of_another_kind_is_named(tmp_path, content, words):
     from rasterize.errors import InputError

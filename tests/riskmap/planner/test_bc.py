@@ -80,5 +80,5 @@ def test_train_baseline_cli_resumes_and_ships_a_planner(tiny_dataset, tmp_path):
     assert plan.waypoints.shape == (12, 2) and np.isfinite(plan.waypoints).all()
     with pytest.raises(InputError, match="cnn_lstm baseline, not rvsg"):
         make_planner(f"rvsg:{out / 'best'}")
-    with pytest.raises(InputError, match="not 'riskmap'"):
+    with pytest.raises(InputError, match="not a risk-map planner one"):
         make_planner(f"riskmap:{out / 'best'}")

@@ -21,7 +21,7 @@ def test_resume_continues_an_interrupted_run_exactly(tiny_dataset, tmp_path):
     assert a.keys() == b.keys()
     for key in a:
         torch.testing.assert_close(a[key], b[key], rtol=0, atol=0)
-    rows = lambda p: [r.split(",")[:-1] for r in (p / "log.csv").read_text().splitlines()]  # noqa: E731
+    rows = lambda p: [r.split(",")[:-1] for r in (p / "log.csv").read_text().splitlines()]
     assert rows(full) == rows(cut)
     with pytest.raises(InputError, match="other settings"):
         train(tiny_train_config(tiny_dataset, cut, epochs=3, lr=0.5), resume=True, progress=False)
@@ -85,3 +85,21 @@ def test_a_narrower_goal_ends_plans_nearer_the_goal(tiny_checkpoint):
         grid = RiskMapPlanner.load(tiny_checkpoint).grid
         errors.append(np.linalg.norm(plan.waypoints[-1] - ego_from_grid(plan.goal_cell, grid)))
     assert errors[1] < errors[0]
+
+
+def test_a_run_begun_before_state_pt_resumes_from_its_last_checkpoint(tiny_dataset, tmp_path):
+    """Runs written before state.pt held last.*, last_optimizer.pt and log.csv (where a kill could
+    leave a row twice): they resume from those, and their log is written again without the repeat."""
+    full, old = tmp_path / "full", tmp_path / "old"
+    train(tiny_train_config(tiny_dataset, full, epochs=2), progress=False)
+    train(tiny_train_config(tiny_dataset, old, epochs=1), progress=False)
+    torch.save(torch.load(old / "state.pt", weights_only=True)["optimizer"], old / "last_optimizer.pt")
+    (old / "state.pt").unlink()
+    log = (old / "log.csv").read_text()
+    (old / "log.csv").write_text(log + log.splitlines()[-1] + "\n")
+    train(tiny_train_config(tiny_dataset, old, epochs=2), resume=True, progress=False)
+    a, b = load_file(str(full / "last.safetensors")), load_file(str(old / "last.safetensors"))
+    for key in a:
+        torch.testing.assert_close(a[key], b[key], rtol=0, atol=0)
+    rows = lambda p: [r.split(",")[:-1] for r in (p / "log.csv").read_text().splitlines()]
+    assert rows(full) == rows(old)
