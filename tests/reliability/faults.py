@@ -138,17 +138,24 @@ class Reference:
 
     def __init__(self, argv_for, folder: Path, ignore: set[str] = frozenset()):
         self.argv_for, self.ignore = argv_for, set(ignore)
+        self.out = folder / "reference"      # the uninterrupted output (input of later commands)
         log = folder / "writes.log"
-        done = run_cli(argv_for(folder / "reference", False), write_log=log)
+        done = run_cli(argv_for(self.out, False), write_log=log)
         assert done.returncode == 0, done.stderr[-3000:]
         self.targets = log.read_text().splitlines()   # the files written, in order
         self.writes = len(self.targets)
         assert self.writes >= 1, "the command made no atomic write; nothing to kill at"
-        self.expected = snapshot(folder / "reference", self.ignore)
+        self.expected = snapshot(self.out, self.ignore)
+
+    def write_number(self, target: str, occurrence: int) -> int:
+        """The number (1-based, as RISKMAP_KILL_AT counts) of the `occurrence`th write of
+        `target` (a path relative to the output folder)."""
+        relative = [Path(t).relative_to(self.out).as_posix() for t in self.targets]
+        return [i + 1 for i, t in enumerate(relative) if t == target][occurrence - 1]
 
     def check_kill_and_resume(self, point: str, out: Path) -> None:
-        """Kill a run at `point` (a KILL_POINTS name or a RISKMAP_KILL_AT value), resume it until it finishes, and assert
-        its folder equals the uninterrupted one."""
+        """Kill a run at `point` (a KILL_POINTS name or a RISKMAP_KILL_AT value), resume it until
+        it finishes, and assert its folder equals the uninterrupted one."""
         at = kill_point(point, self.writes)
         killed = run_cli(self.argv_for(out, False), kill_at=at)
         assert killed.returncode == KILLED, (at, killed.returncode, killed.stderr[-3000:])

@@ -53,7 +53,7 @@ def run_on_small_disk(argv_for, small: str, folder):
     done = subprocess.run(["unshare", "-rm", "bash", "-c", script], cwd=ROOT, env=env,
                           capture_output=True, text=True, timeout=600, check=False)
     assert done.returncode == 0, done.stderr[-2000:]
-    read = lambda name: (folder / name).read_text()   # noqa: E731
+    read = lambda name: (folder / name).read_text()
     return (int(read("first.rc")), read("first.err"), folder / "full", int(read("again.rc")),
             folder / "resumed")
 

@@ -35,36 +35,9 @@ import yaml
 
 from tests.adversary.conftest import TINY
 from tests.reliability.conftest import kill_point_params
-from tests.reliability.faults import KILLED, Reference, _strip_clock, leftovers, run_cli, snapshot
+from tests.reliability.faults import Reference, _strip_clock, run_cli
 
 TRAFFIC = "checkpoints/crash_traffic_highway"
-
-
-class _Reference(Reference):
-    """A Reference that also names its uninterrupted output folder (input of a later command) and
-    the targets of its atomic writes, in order (to kill a run at a chosen one)."""
-
-    def __init__(self, argv_for, folder: Path, ignore: set[str] = frozenset()):
-        super().__init__(argv_for, folder, ignore)
-        self.out = folder / "reference"
-        self.targets = [Path(line).relative_to(self.out).as_posix()
-                        for line in (folder / "writes.log").read_text().splitlines()]
-
-    def write_number(self, target: str, occurrence: int) -> int:
-        """The number (1-based, as RISKMAP_KILL_AT counts) of the `occurrence`th write of `target`."""
-        return [i + 1 for i, t in enumerate(self.targets) if t == target][occurrence - 1]
-
-    def check_kill_at(self, at: str, out: Path) -> None:
-        """`check_kill_and_resume` at an explicit RISKMAP_KILL_AT value."""
-        killed = run_cli(self.argv_for(out, False), kill_at=at)
-        assert killed.returncode == KILLED, (at, killed.returncode, killed.stderr[-3000:])
-        resumed = run_cli(self.argv_for(out, True))
-        assert resumed.returncode == 0, (at, resumed.stderr[-3000:])
-        got = snapshot(out, self.ignore)
-        assert sorted(got) == sorted(self.expected), (at, sorted(set(got) ^ set(self.expected)))
-        for name, content in self.expected.items():
-            assert got[name] == content, (at, name)
-        assert not leftovers(out), (at, leftovers(out))
 
 
 def _resume(argv: list[str], resume: bool) -> list[str]:
@@ -93,7 +66,7 @@ def _scenes(out, resume):
 
 @pytest.fixture(scope="module")
 def scenes_reference(tmp_path_factory):
-    return _Reference(_scenes, tmp_path_factory.mktemp("scenes"))
+    return Reference(_scenes, tmp_path_factory.mktemp("scenes"))
 
 
 @pytest.mark.parametrize("point", kill_point_params())
@@ -120,14 +93,14 @@ def _attack(scenes: Path, selector: str, planner: str, iterations: int):
 @pytest.fixture(scope="module")
 def distance_attack_reference(scenes_reference, tmp_path_factory):
     # 80 iterations: the car ahead in the next lane of scene 1 cuts in (a collision for guard-data)
-    return _Reference(_attack(scenes_reference.out, "distance", "replay", 80),
+    return Reference(_attack(scenes_reference.out, "distance", "replay", 80),
                       tmp_path_factory.mktemp("attack_distance"), ATTACK_IGNORE)
 
 
 @pytest.fixture(scope="module")
 def crash_attack_reference(scenes_reference, tmp_path_factory):
     # CRASH with the shipped selectors against a closed-loop ego (tests/adversary/crash)
-    return _Reference(_attack(scenes_reference.out, "crash", "idm", 20),
+    return Reference(_attack(scenes_reference.out, "crash", "idm", 20),
                       tmp_path_factory.mktemp("attack_crash"), ATTACK_IGNORE)
 
 
@@ -152,7 +125,7 @@ def _guard_data(attacks: list[Path]):
 
 @pytest.fixture(scope="module")
 def guard_data_reference(distance_attack_reference, crash_attack_reference, tmp_path_factory):
-    return _Reference(_guard_data([distance_attack_reference.out, crash_attack_reference.out]),
+    return Reference(_guard_data([distance_attack_reference.out, crash_attack_reference.out]),
                       tmp_path_factory.mktemp("guard_data"))
 
 
@@ -174,12 +147,12 @@ def _search(algorithm: str, seed: int):
 
 @pytest.fixture(scope="module")
 def nsga2_reference(tmp_path_factory):
-    return _Reference(_search("nsga2", 1), tmp_path_factory.mktemp("search_nsga2"))
+    return Reference(_search("nsga2", 1), tmp_path_factory.mktemp("search_nsga2"))
 
 
 @pytest.fixture(scope="module")
 def random_reference(tmp_path_factory):
-    return _Reference(_search("random", 0), tmp_path_factory.mktemp("search_random"))
+    return Reference(_search("random", 0), tmp_path_factory.mktemp("search_random"))
 
 
 @pytest.mark.parametrize("point", kill_point_params())
@@ -204,7 +177,7 @@ def _train_traffic(data: Path):
 
 @pytest.fixture(scope="module")
 def train_traffic_reference(collected, tmp_path_factory):
-    return _Reference(_train_traffic(collected), tmp_path_factory.mktemp("train_traffic"))
+    return Reference(_train_traffic(collected), tmp_path_factory.mktemp("train_traffic"))
 
 
 @pytest.mark.parametrize("point", kill_point_params())
@@ -218,7 +191,7 @@ def test_train_traffic_killed_between_epochs(train_traffic_reference, stage, tmp
     it: from the second's, before its log line): the resumed run draws what the uninterrupted one
     drew (both random generators are in the state)."""
     at = f"{train_traffic_reference.write_number('state.pt', 2)}:{stage}"
-    train_traffic_reference.check_kill_at(at, tmp_path / "out")
+    train_traffic_reference.check_kill_and_resume(at, tmp_path / "out")
 
 
 # ---------------------------------------------------------------- adversary train-selector
@@ -233,7 +206,7 @@ def _train_selector(data: Path):
 
 @pytest.fixture(scope="module")
 def train_selector_reference(collected, tmp_path_factory):
-    return _Reference(_train_selector(collected), tmp_path_factory.mktemp("train_selector"))
+    return Reference(_train_selector(collected), tmp_path_factory.mktemp("train_selector"))
 
 
 @pytest.mark.parametrize("point", kill_point_params())
@@ -266,7 +239,7 @@ def stress_test_reference(tmp_path_factory):
     def argv(out, resume):
         return _resume(["adversary", "stress-test", "--config", str(config), "--workers", "1",
                         "--out", str(out)], resume)
-    return _Reference(argv, folder, STRESS_IGNORE)
+    return Reference(argv, folder, STRESS_IGNORE)
 
 
 @pytest.mark.parametrize("point", kill_point_params())
