@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import json
 import warnings
-import zipfile
 from dataclasses import replace
 from pathlib import Path
 
@@ -41,6 +40,7 @@ from rasterize.raster import rasterize_scene
 from rasterize.scene import Scene
 from rasterize.scene_io import check_packed, unpack_scene
 from riskmap.data.collect import FORMAT_VERSION, INDEX, MANIFEST
+from riskmap.infra.atomic import read_npz
 
 try:  # torch is optional for reading scenes, required for DataLoader use
     from torch.utils.data import Dataset as _TorchDataset
@@ -69,13 +69,8 @@ def _load_shard(path: Path) -> dict[str, np.ndarray]:
     if not path.exists():
         raise InputError(f"shard {path} listed in the index is missing; "
                          "run `riskmap collect ... --resume` to rebuild it")
-    try:
-        with np.load(path) as data:
-            arrays = {k: data[k] for k in data.files}
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
-        raise InputError(f"shard {path} is corrupt or truncated ({type(err).__name__}); delete it "
-                         "and run `riskmap collect ... --resume` to write it again") from None
-    return arrays
+    return read_npz(path, "shard", "delete it and run `riskmap collect ... --resume` to write it "
+                    "again")
 
 
 class DemoDataset(_TorchDataset):

@@ -231,16 +231,11 @@ WINDOW_KEYS = ("node_u", "node_i", "edge", "mask", "label")
 def load_job(path: Path) -> dict[str, np.ndarray]:
     """The windows of one job file; a damaged one (unreadable, lacking arrays, NaN or inf
     features) is an InputError naming it."""
-    import zipfile
+    from riskmap.infra.atomic import read_npz
 
     fix = ("delete it (and its .json) and write it again: `riskmap guard collect --resume`, or "
            "`adversary guard-data --resume` for attack windows")
-    try:
-        with np.load(path) as data:
-            arrays = {key: data[key] for key in data.files}
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
-        raise InputError(f"guard windows {path} are corrupt or truncated ({type(err).__name__}); "
-                         f"{fix}") from None
+    arrays = read_npz(path, "guard windows", fix)
     missing = [key for key in WINDOW_KEYS if key not in arrays]
     if missing:
         raise InputError(f"guard windows {path} lack {', '.join(missing)}; {fix}")

@@ -71,3 +71,18 @@ def write_json(path: Path, data) -> None:
 
 def write_npz(path: Path, arrays: dict[str, np.ndarray]) -> None:
     atomic_write(path, lambda f: np.savez_compressed(f, **arrays))
+
+
+def read_npz(path: Path, what: str, fix: str) -> dict[str, np.ndarray]:
+    """Every array of the npz at `path`; a damaged file is one InputError naming `what` it is
+    and the `fix`."""
+    import zipfile
+
+    from rasterize.errors import InputError
+
+    try:
+        with np.load(path) as data:
+            return {key: data[key] for key in data.files}
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as err:
+        raise InputError(f"{what} {path} is corrupt or truncated ({type(err).__name__}); {fix}"
+                         ) from None
