@@ -17,8 +17,9 @@ Your own planner, with no change to the toolkit:
 
     py:package.module:Factory[?key=value&...]
                      `Factory(key=value, ..., seed=SEED)` (seed only if it takes one), imported
-                     from any module on the path or in the working directory; values are read as int, finite float,
-                     true/false or text (URL-quoted where they hold `&`, `=` or `?`)
+                     from any module on the path or in the working directory; values are read
+                     as int, finite float, true/false or text (URL-quoted where they hold `&`,
+                     `=` or `?`)
     NAME:ARG         entry `NAME` of the entry-point group `riskmap.planners` (an installed
                      package declares it), called as `factory(ARG, seed=SEED)`
 
@@ -116,16 +117,20 @@ def _literal(text: str):
 
 def _from_python(spec: str, arg: str, seed: int):
     """`py:package.module:Factory?key=value&...` -> (Factory, {key: value, ..., [seed: seed]})."""
-    import importlib
-    import inspect
-    import os
-    import sys
-    from urllib.parse import parse_qsl
-
     target, _, query = arg.partition("?")
     module_name, _, attribute = target.partition(":")
     if not module_name or not attribute:
         raise InputError(f"planner {spec!r}: write py:package.module:Factory[?key=value&...]")
+    kwargs = _spec_keys(spec, query)
+    factory = _factory(spec, module_name, attribute)
+    _bind_seed(spec, attribute, factory, kwargs, seed)
+    return factory, kwargs
+
+
+def _spec_keys(spec: str, query: str) -> dict:
+    """The typed keys of a `py:` SPEC's query (`key=value&...`)."""
+    from urllib.parse import parse_qsl
+
     try:
         pairs = parse_qsl(query, keep_blank_values=True, strict_parsing=bool(query))
     except ValueError:
@@ -136,15 +141,23 @@ def _from_python(spec: str, arg: str, seed: int):
         if key in kwargs:
             raise InputError(f"planner {spec!r} gives {key!r} twice; give it once")
         kwargs[key] = _literal(value)
+    return kwargs
+
+
+def _factory(spec: str, module_name: str, attribute: str):
+    """The callable `attribute` (dotted) of module `module_name`."""
+    import importlib
+    import os
+    import sys
+
     if os.getcwd() not in sys.path:
         sys.path.append(os.getcwd())   # as `python -m` would: a module beside the user is found
     try:
-        module = importlib.import_module(module_name)
+        factory = importlib.import_module(module_name)
     except Exception as err:  # noqa: BLE001 - any failure to import is the user's module's
         raise InputError(f"planner {spec!r}: module {module_name!r} cannot be imported "
                          f"({type(err).__name__}: {err}); install it or add it to PYTHONPATH"
                          ) from None
-    factory = module
     for part in attribute.split("."):
         factory = getattr(factory, part, None)
         if factory is None:
@@ -153,21 +166,27 @@ def _from_python(spec: str, arg: str, seed: int):
     if not callable(factory):
         raise InputError(f"planner {spec!r}: {attribute} is a {type(factory).__name__}, not a "
                          "factory; name a class or function that returns a planner")
+    return factory
+
+
+def _bind_seed(spec: str, attribute: str, factory, kwargs: dict, seed: int) -> None:
+    """Add `seed` to `kwargs` when the factory takes one (and it is not given); refuse keys the
+    factory does not take."""
+    import inspect
+
     try:
         signature = inspect.signature(factory)
     except (TypeError, ValueError):
-        signature = None
-    if signature is not None:
-        takes_any = any(p.kind is p.VAR_KEYWORD for p in signature.parameters.values())
-        if "seed" not in kwargs and (takes_any or "seed" in signature.parameters):
-            kwargs["seed"] = seed
-        try:
-            signature.bind(**kwargs)
-        except TypeError as err:
-            names = ", ".join(signature.parameters) or "nothing"
-            raise InputError(f"planner {spec!r}: {attribute} does not take these keys ({err}); "
-                             f"drop them: it takes {names}") from None
-    return factory, kwargs
+        return                          # a builtin without a signature: call it and see
+    takes_any = any(p.kind is p.VAR_KEYWORD for p in signature.parameters.values())
+    if "seed" not in kwargs and (takes_any or "seed" in signature.parameters):
+        kwargs["seed"] = seed
+    try:
+        signature.bind(**kwargs)
+    except TypeError as err:
+        names = ", ".join(signature.parameters) or "nothing"
+        raise InputError(f"planner {spec!r}: {attribute} does not take these keys ({err}); "
+                         f"drop them: it takes {names}") from None
 
 
 def _plugin(name: str):

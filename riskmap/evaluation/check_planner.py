@@ -72,29 +72,43 @@ def plan_problems(plan, speed: float) -> list[str]:
         return [f"Plan.waypoints has shape {waypoints.shape}; the contract is [12, 2] (6 s at 0.5 s)"]
     if not np.isfinite(waypoints).all():
         return ["Plan.waypoints holds NaN or inf; every waypoint must be finite"]
-    problems = []
+    return _scale_problems(waypoints, speed) + _axis_problems(waypoints, speed)
+
+
+def _reach_m(speed: float) -> float:
+    """How far the first waypoint (0.5 s ahead) can be from the ego at `speed` (m/s)."""
+    return speed * PLAN_DT_S + 0.5 * MAX_ACCEL_MS2 * PLAN_DT_S ** 2 + 1.0
+
+
+def _scale_problems(waypoints: np.ndarray, speed: float) -> list[str]:
+    """Units and frame: km/h, world coordinates, impossible speeds (the first that applies)."""
     steps = np.linalg.norm(np.diff(np.vstack([[0.0, 0.0], waypoints]), axis=0), axis=1) / PLAN_DT_S
-    reach = speed * PLAN_DT_S + 0.5 * MAX_ACCEL_MS2 * PLAN_DT_S ** 2 + 1.0
     first = float(np.linalg.norm(waypoints[0]))
     if speed > 3.0 and abs(steps[0] / speed - KMH_PER_MS) < 0.4:
-        problems.append(f"the first step implies {steps[0]:.1f} m/s at a speed of {speed:.1f} m/s "
-                        "(3.6x: km/h?); the waypoints are metres 0.5 s apart")
-    elif first > reach:
-        problems.append(f"the first waypoint is {first:.0f} m from the ego at {speed:.1f} m/s; "
-                        "waypoints are in the ego frame (origin at the ego, x forward, y left), "
-                        "not world coordinates")
-    elif steps.max() > MAX_SPEED_MS:
-        problems.append(f"the waypoints imply {steps.max():.0f} m/s; they are metres 0.5 s apart")
-    # In one second at speed no vehicle turns by more than about 60 degrees: the plan's first
-    # second must point forward (x), else its axes are not the ego frame's.
+        return [(f"the first step implies {steps[0]:.1f} m/s at a speed of {speed:.1f} m/s "
+                "(3.6x: km/h?); the waypoints are metres 0.5 s apart")]
+    if first > _reach_m(speed):
+        return [(f"the first waypoint is {first:.0f} m from the ego at {speed:.1f} m/s; "
+                "waypoints are in the ego frame (origin at the ego, x forward, y left), "
+                "not world coordinates")]
+    if steps.max() > MAX_SPEED_MS:
+        return [f"the waypoints imply {steps.max():.0f} m/s; they are metres 0.5 s apart"]
+    return []
+
+
+def _axis_problems(waypoints: np.ndarray, speed: float) -> list[str]:
+    """In one second at speed no vehicle turns by more than about 60 degrees: the plan's first
+    second must point forward (x), else its axes are not the ego frame's."""
     second = waypoints[round(1.0 / PLAN_DT_S) - 1]
-    if speed > 3.0 and first <= reach and np.linalg.norm(second) > 0.5 * speed * 1.0:
-        angle = np.degrees(abs(np.arctan2(second[1], second[0])))
-        if angle > 120:
-            problems.append("the plan runs backwards at speed; x points forward in the ego frame")
-        elif angle > 60:
-            problems.append("the plan runs sideways at speed; x is forward and y left (swapped axes?)")
-    return problems
+    if speed <= 3.0 or np.linalg.norm(waypoints[0]) > _reach_m(speed) \
+            or np.linalg.norm(second) <= 0.5 * speed:
+        return []
+    angle = np.degrees(abs(np.arctan2(second[1], second[0])))
+    if angle > 120:
+        return ["the plan runs backwards at speed; x points forward in the ego frame"]
+    if angle > 60:
+        return ["the plan runs sideways at speed; x is forward and y left (swapped axes?)"]
+    return []
 
 
 class _Checking:

@@ -94,6 +94,14 @@ def _alive_nodes(ray) -> dict[str, str]:
             if node.get("Alive")}
 
 
+def _log_lost_nodes(before: dict[str, str], now: dict[str, str]) -> dict[str, str]:
+    """Log each node of `before` missing from `now` (node id -> address); returns `now`."""
+    for node in before.keys() - now.keys():
+        _log(f"node {node[:12]} at {before[node]} lost; {len(now)} node(s) left, its running "
+             "items are retried")
+    return now
+
+
 def _run_ray(fn, items: list, workers: int, address: str | None, on_lost) -> Iterator[tuple[Any, Any]]:
     started_here = init_ray(workers, address)
     import ray
@@ -105,11 +113,7 @@ def _run_ray(fn, items: list, workers: int, address: str | None, on_lost) -> Ite
     try:
         while pending:
             done, _ = ray.wait(list(pending), num_returns=1, timeout=1.0)
-            now = _alive_nodes(ray)
-            for node in nodes.keys() - now.keys():
-                _log(f"node {node[:12]} at {nodes[node]} lost; {len(now)} node(s) left, "
-                     "its running items are retried")
-            nodes = now
+            nodes = _log_lost_nodes(nodes, _alive_nodes(ray))
             for ref in done:
                 item, attempt = pending.pop(ref)
                 try:
