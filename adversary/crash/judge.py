@@ -148,7 +148,9 @@ def rollout(record: SceneRecord, tracks: np.ndarray, rows, planner, planner_spec
     """Drive `planner` (made from `planner_spec`) against the log spliced with `tracks` at `rows`
     (module docstring). Empty `rows` (tracks [0, F, 6]) drives against the untouched record.
     `keep_scene`: also keep the last step as a `Scene` with the whole drive as history, at the
-    control rate, lanes included (the campaign report's frames)."""
+    control rate, lanes included (the campaign report's frames). A recorded scene
+    (`AttackScene.recording`) is driven on its CommonRoad recording instead, the ego handed over at
+    t0 (`adversary.crash.recorded.rollout_recorded`)."""
     from riskmap.sim.log_replay import LogReplayEpisode
     from riskmap.sim.plan import requires_log
     from riskmap.sim.rollout import DriveConfig, DriveHooks, drive_episode
@@ -158,12 +160,17 @@ def rollout(record: SceneRecord, tracks: np.ndarray, rows, planner, planner_spec
     if abs(1.0 / control_hz - record.log.dt_s) > 1e-9:
         raise InputError(f"control_hz={control_hz} differs from the record's {1 / record.log.dt_s:g} Hz")
     log = splice_tracks(record, tracks, rows)
+    if scene.recording:              # a CommonRoad recording: its lanelets, ego handed over at t0
+        from adversary.crash.recorded import rollout_recorded
+
+        drove = rollout_recorded(record, log, planner, planner_spec, control_hz, replan_hz, keep_scene)
+        return Rollout(**drove, wall_s=time.perf_counter() - started)
     env = cached_env(scene.env_id, control_hz)
     replay = requires_log(planner)
     if replay:
         planner.set_log(log)          # the ego's own record is never spliced
     run = LogReplayEpisode(env, scene.env_id, scene.scene_seed, scene.episode, log, control_hz,
-                           replay_ego=replay)
+                           replay_ego=replay, static_agents=scene.static_agents)
     config = DriveConfig(scene.env_id, 1, scene.scene_seed, control_hz, replan_hz,
                          episode_s=(log.num_steps - 1) * log.dt_s)
     drive = drive_episode(env, planner, config, scene.episode, run=run,
@@ -249,6 +256,12 @@ def _first_collision(result: Rollout, ego: int, others: list[int], from_step: in
     return None, None, best
 
 
+def collided_with(result: Rollout, record: SceneRecord, row: int) -> bool:
+    """Whether the ego of `result` hits window `row`'s vehicle from t0 on (the judge's criterion)."""
+    agent = int(result.row_ids(record)[row])
+    return agent >= 0 and _first_collision(result, result.ego, [agent], result.t0_step)[0] is not None
+
+
 def _ego_accelerations(result: Rollout, end_step: int) -> tuple[float, float]:
     """(min longitudinal acceleration, max |acceleration vector|), m/s², over the
     ACCEL_WINDOW_S before `end_step`: the first from the speed's finite differences (negative =
@@ -279,6 +292,17 @@ def _min_gap(result: Rollout, from_step: int, to_step: int) -> float:
     return float(min(gaps, default=float("inf")))
 
 
+def _worst_off_road(log: HumanLog, spliced: HumanLog, agent: int, steps: list[int], area) -> float:
+    """The largest off-road fraction of `agent`'s spliced box over `steps`, counting only steps at
+    which the map covers where the agent really was (its logged box is valid and on the lanes):
+    a recorded vehicle that drove off the end of a finite map, or through a junction square the
+    lane polygons leave uncovered, is not off the road there."""
+    fracs = [off_road_fraction(spliced.states[agent, k], spliced.sizes[agent], area) for k in steps
+             if spliced.valid[agent, k] and k < log.num_steps and log.valid[agent, k]
+             and off_road_fraction(log.states[agent, k], log.sizes[agent], area) <= OFF_ROAD_FRACTION]
+    return max(fracs, default=0.0)
+
+
 def judge(record: SceneRecord, tracks: np.ndarray, rows, adversary_row: int, planner,
           planner_spec: str, result: Rollout | None = None) -> dict:
     """STRIVE's metrics of one attack (JSON-ready); `result`: a rollout of these tracks already
@@ -291,8 +315,9 @@ def judge(record: SceneRecord, tracks: np.ndarray, rows, adversary_row: int, pla
       planner already hit something before the attack started (the attack is then moot).
     adversary_off_road / other_off_road: more than 5% of the box outside the union of the
       window's lane polygons at some 2 Hz step t0 + 0.5 ... up to the collision (the whole
-      horizon without one); "other": every window row but the ego and the adversary, at its
-      spliced (generated or logged) state. adversary_off_road_max / other_off_road_max: the
+      horizon without one) at which the map covers the vehicle's logged box (`_worst_off_road`);
+      "other": every window row but the ego and the adversary, at its spliced (generated or
+      logged) state. adversary_off_road_max / other_off_road_max: the
       largest fractions seen.
     kinematic_value_mps: |v_ego - v_adv| (velocity vectors) at the collision (None without one).
     ego_min_accel_mps2 / ego_max_abs_accel_mps2: see `_ego_accelerations`, over the 2 s before
@@ -333,9 +358,7 @@ def judge(record: SceneRecord, tracks: np.ndarray, rows, adversary_row: int, pla
     for row, agent in enumerate(record.agent_ids):
         if row == 0:
             continue
-        fracs = [off_road_fraction(spliced.states[agent, k], spliced.sizes[agent], area)
-                 for k in knot_steps if spliced.valid[agent, k]]
-        worst = max(fracs, default=0.0)
+        worst = _worst_off_road(record.log, spliced, int(agent), knot_steps, area)
         if row == adversary_row:
             adv_frac = worst
         else:

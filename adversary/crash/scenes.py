@@ -23,9 +23,11 @@ from rasterize.scene import Lane, LineType, Scene
 from riskmap.infra.atomic import write_json, write_npz
 from riskmap.sim.episode import cached_env
 from riskmap.sim.log_replay import HumanLog
+from riskmap.sim.static_agents import MAX_STATIC_AGENTS, STATIC_FAMILIES
 
 WINDOW_DT_S = 0.5          # the traffic model's step (2 Hz)
 HISTORY_S = 2.0            # past the window shows (4 steps before the current one)
+RECORDED_ENV = "commonroad"  # env_id of a scene cut from a CommonRoad recording (adversary.crash.recorded)
 
 @dataclass(frozen=True)
 class AttackScene:
@@ -36,14 +38,37 @@ class AttackScene:
     episode: int
     t0_s: float = 2.0          # attack time; at least HISTORY_S so the window has its history
     horizon_s: float = 6.0     # generated future after t0 (12 steps at 2 Hz)
+    static_agents: int = 0     # parked / stopped vehicles added to the simulated episode
+    recording: str = ""        # a CommonRoad recording (.xml) instead of a highway-env episode:
+    ego_id: int = -1           # then the recorded vehicle attacked as the ego (its obstacle id)
 
     @property
     def future_steps(self) -> int:
         """Window steps after the current one (12 for the default horizon)."""
         return round(self.horizon_s / WINDOW_DT_S)
 
+    @property
+    def where(self) -> str:
+        """The scene in words (titles, messages)."""
+        if self.recording:
+            return f"{Path(self.recording).stem} vehicle {self.ego_id}"
+        return f"{self.env_id} seed {self.scene_seed} episode {self.episode}"
+
     def check(self, control_hz: int) -> None:
-        family_of_env(self.env_id)      # InputError naming the supported envs
+        if self.recording or self.env_id == RECORDED_ENV:
+            if self.env_id != RECORDED_ENV or not self.recording or self.ego_id < 0:
+                raise InputError(f"a recorded scene needs env_id {RECORDED_ENV!r}, a recording and an "
+                                 f"ego_id >= 0 (got {self.env_id!r}, {self.recording!r}, {self.ego_id}); "
+                                 "record it with `adversary scenes --commonroad`")
+        else:
+            family = family_of_env(self.env_id)      # InputError naming the supported envs
+            if self.static_agents and family not in STATIC_FAMILIES:
+                raise InputError(f"static vehicles are placed on {', '.join(STATIC_FAMILIES)} scenes only, "
+                                 f"not on {self.env_id}; use static_agents=0 (--static-agents 0)")
+        if (not 0 <= self.static_agents <= MAX_STATIC_AGENTS
+                or (self.static_agents and (self.recording or self.env_id == RECORDED_ENV))):
+            raise InputError(f"static_agents={self.static_agents} must be 0 to {MAX_STATIC_AGENTS}, and 0 for "
+                             "a recorded scene (its vehicles are the recording's); change --static-agents")
         if self.t0_s < HISTORY_S - 1e-9:
             raise InputError(f"attack time t0_s={self.t0_s} leaves less than {HISTORY_S} s of history; "
                              f"use t0_s >= {HISTORY_S}")
@@ -64,6 +89,7 @@ class SceneRecord:
     log: HumanLog
     window: Scene
     agent_ids: np.ndarray
+    family: str = ""           # recorded scenes: their traffic-model family (us101, lankershim, ...)
 
     @property
     def t0_step(self) -> int:
@@ -115,7 +141,8 @@ def record_attack_scene(scene: AttackScene, control_hz: int = 10, radius_m: floa
     if max_agents < 2 or radius_m <= 0:
         raise InputError(f"max_agents={max_agents} must be >= 2 and radius_m={radius_m} positive")
     env = cached_env(scene.env_id, control_hz) if env is None else env
-    run = Episode(env, scene.env_id, scene.scene_seed, scene.episode, control_hz)
+    run = Episode(env, scene.env_id, scene.scene_seed, scene.episode, control_hz,
+                  static_agents=scene.static_agents)
     total = round((scene.t0_s + scene.horizon_s) * control_hz)
     for _ in range(total):
         run.step()
@@ -163,6 +190,8 @@ def save_record(record: SceneRecord, path: Path) -> None:
         "route_xy": empty if record.window.route_xy is None else record.window.route_xy,
         "has_route": np.bool_(record.window.route_xy is not None),
     }
+    if record.family:
+        arrays["family"] = np.array(record.family)
     write_npz(path, arrays)
     write_json(path.with_suffix(".json"), asdict(record.scene))
 
@@ -200,4 +229,8 @@ def load_record(path: Path) -> SceneRecord:
     route = d["route_xy"] if bool(d["has_route"]) else None
     step = round(scene.t0_s / log.dt_s)
     window = window_of(log, d["agent_ids"], step, scene.future_steps, lanes, route, scene.env_id)
-    return SceneRecord(scene, log, window, d["agent_ids"].astype(np.int64))
+    if scene.recording and not Path(scene.recording).is_file():
+        raise InputError(f"scene record {path} was cut from {scene.recording}, which is not there; "
+                         "put the recording back or record the scenes again with `adversary scenes`")
+    family = str(d["family"]) if "family" in d else ""
+    return SceneRecord(scene, log, window, d["agent_ids"].astype(np.int64), family)

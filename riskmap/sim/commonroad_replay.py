@@ -197,7 +197,7 @@ class CommonRoadWorld:
         hist, _ = traffic.resample(np.array([ego]), hist_t)
         self.track_t, self.track = list(hist_t), list(hist[0])
         self.history_len = len(hist_t)
-        self.road = road_from_lanelets(traffic.scenario.lanelet_network)
+        self.road = self._build_road()
         self.lanes = lanes_from_lanelets(traffic.scenario.lanelet_network)
         self.vehicle = self._planned_vehicle(self.track[-1])
         self.others = np.array([a for a in range(len(traffic.ids)) if a != ego], dtype=np.int64)
@@ -207,6 +207,10 @@ class CommonRoadWorld:
         self.crashed = self.off_network = False
         self.collision: dict | None = None
         self._gaps: dict[float, list] = {}        # radius -> this step's (gap, agent, xy) near
+
+    def _build_road(self):
+        """The highway-env road of the lanelets (a subclass may reuse one built before)."""
+        return road_from_lanelets(self.traffic.scenario.lanelet_network)
 
     def _span(self, start_s: float | None, duration_s: float | None) -> tuple[float, int]:
         first, last = self.traffic.span(self.ego_index)

@@ -165,9 +165,12 @@ class Episode:
     """
 
     def __init__(self, env, env_id: str, seed: int, episode: int, rate_hz: int = 10,
-                 setup=None):
+                 setup=None, static_agents: int = 0):
         """`setup(base_env)`, if given, rearranges the road after the human ego is installed and
-        before anything is recorded (scenario templates set their initial conditions there)."""
+        before anything is recorded (scenario templates set their initial conditions there).
+        `static_agents`: parked / stopped vehicles added after that
+        (`riskmap.sim.static_agents`), placed by a generator of (seed, episode) alone, so that a
+        re-simulation of the episode puts them at the same places."""
         from rasterize.highway import TrafficRecorder
 
         self.env, self.base = env, env.unwrapped
@@ -180,6 +183,12 @@ class Episode:
         self.driver = _install_human_ego(self.base, rng, self.setup)
         if setup is not None:
             setup(self.base)
+        self.static_agents = static_agents
+        if static_agents:
+            from riskmap.sim.static_agents import place_static_vehicles
+
+            place_static_vehicles(self.base.road, self.ego, family_of_env(env_id), static_agents,
+                                  np.random.default_rng([seed, episode, 2]))
         self.rate_hz, self.dt = rate_hz, 1.0 / rate_hz
         self.recorder = TrafficRecorder(self.base.road, self.ego, self.dt)
         self.recorder.record()

@@ -136,11 +136,13 @@ class LogReplayEpisode(Episode):
 
     With `replay_ego`, the vehicle the ego is handed to replays the human's own record too (log
     playback; the planner's commands are ignored). `next_step` is the record step being stepped to.
+    `static_agents`: the number of static vehicles the log was recorded with (`Episode`); the
+    reset places them again, and they replay their records like every other vehicle.
     """
 
     def __init__(self, env, env_id: str, seed: int, episode: int, log: HumanLog, rate_hz: int = 10,
-                 replay_ego: bool = False):
-        super().__init__(env, env_id, seed, episode, rate_hz)
+                 replay_ego: bool = False, static_agents: int = 0):
+        super().__init__(env, env_id, seed, episode, rate_hz, static_agents=static_agents)
         if abs(log.dt_s - self.dt) > 1e-9:
             raise InputError(f"recorded episode has dt {log.dt_s} s, the replay steps {self.dt} s")
         self.log, self.replay_ego = log, replay_ego
@@ -165,6 +167,10 @@ class LogReplayEpisode(Episode):
                 raise InputError("the recorded episode's vehicles do not start where this episode's "
                                  "do; it was recorded with another env, seed or episode")
             self.recorder.adopt(self._add(agent, 0), vehicle)
+        starting = {int(a) for a in np.flatnonzero(log.valid[:, 0]) if a != log.ego_id}
+        if starting - set(self._replayed):
+            raise InputError("the recorded episode starts with vehicles this episode lacks; it was "
+                             "recorded with another env, seed, episode or number of static vehicles")
 
     def _add(self, agent: int, step: int):
         vehicle = self._cls(self.base.road, self.log.states[agent], self.log.sizes[agent], self, step)
