@@ -1,25 +1,29 @@
-"""CRASH on our benchmark: the paper's Table I and Table III analogues, and the cost of k.
+"""CRASH on our benchmark: the paper's Table I and Table III analogues and the strength ablations.
 
-    python experiments/crash_tables.py --part table1 --family highway [--count 100] [--workers 1]
-    python experiments/crash_tables.py --part table3 --family intersection
-    python experiments/crash_tables.py --part k --family highway --count 30
-    python experiments/crash_tables.py --part collect       # gather every finished run into tables
+    python experiments/crash_tables.py --family highway --part table3 [--count 100] [--workers 2]
+    python experiments/crash_tables.py --family us101 --part table1 --only idm:crash,replay:crash
+    python experiments/crash_tables.py --family highway --part ablation --count 40
+    python experiments/crash_tables.py --part collect      # every finished run -> results/crash/
 
 Every run is an `adversary attack` run (resumable) under out/crash/<family>/<run>/ on the held-out
-scenes data/attack/<family> (`adversary scenes --env ... --seed 500 --count 120`); `collect` writes
-experiments/results/crash/results.json and tables.md from whatever has finished.
+scenes data/attack/<family> (see experiments/README.md, "CRASH at strength", for the commands
+that record them: simulated families with static agents, US-101 from recordings). `collect`
+writes experiments/results/crash/results.json and tables.md from whatever has finished, with 95%
+Wilson intervals; a run still going counts the scenes attacked so far (the table says how many).
 
 Table I: planners replay / IDM (rule-based, closed loop) / the risk-aware planner, each attacked
 with CRASH (MAM+ASM) and with STRIVE's distance-based selection (DS).
-Table III: the IDM planner with DS, DS+MAM, ASM (no MAM) and MAM+ASM, plus nearest and random.
-k: the IDM planner under MAM+ASM with the planner re-run every k = 5, 20, 50, 200 iterations.
-The tables re-run IDM every k = 20 iterations and the risk-aware planner every k = 50.
+Table III: IDM with DS, DS+MAM, ASM (no MAM) and MAM+ASM.
+ablation: IDM under MAM+ASM with one setting changed at a time: full iterations instead of the
+early stop, the planner re-run every k = 1 / 5 / 20 iterations, the selector trained through the
+generation loss, 400 iterations, the softmin-over-time adversarial loss.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from adversary.crash.attack import AttackConfig
@@ -27,53 +31,75 @@ from adversary.crash.run import TABLE_HEADER, run_attacks, summarise, table_row
 from riskmap.infra.atomic import atomic_write, write_json
 
 ROOT = Path(__file__).resolve().parents[1]
-PLANNERS = {"replay": "replay", "idm": "idm", "riskmap": "riskmap:checkpoints/riskmap_{family}"}
-TABLE1 = [(p, s) for p in ("replay", "idm", "riskmap") for s in ("crash", "distance")]
-TABLE3 = [("idm", s) for s in ("distance", "distance+mam", "crash-no-mam", "crash", "nearest", "random")]
-K_VALUES = (5, 20, 50, 200)
-# k per planner for the tables: a risk-aware planner rollout costs ~8x an IDM one on this CPU,
-# so it is re-run every 50 iterations (the k sweep on IDM shows what that costs in success).
+FAMILIES = ("highway", "intersection", "us101")
+PLANNERS = {
+    "replay": "replay",
+    "idm": "idm",
+    "riskmap": {"highway": "riskmap:checkpoints/riskmap_highway",
+                "intersection": "riskmap:checkpoints/riskmap_intersection",
+                "us101": "riskmap:checkpoints/riskmap_us101"},
+}
+# A risk-aware planner rollout costs ~8x an IDM one on this CPU: it is re-run every 50 iterations.
 PLANNER_K = {"replay": 20, "idm": 20, "riskmap": 50}
 LABELS = {"distance": "DS", "distance+mam": "DS+MAM", "crash-no-mam": "ASM", "crash": "MAM+ASM",
           "nearest": "nearest", "random": "random"}
 
 
-def run_dir(family: str, planner: str, selector: str, k: int | None = None) -> Path:
-    name = f"{planner}_{selector.replace('+', '_')}" + (f"_k{k}" if k is not None else "")
-    return ROOT / "out" / "crash" / family / name
+@dataclass(frozen=True)
+class Run:
+    planner: str
+    selector: str
+    variant: str = ""                         # "" for the default attack settings
+    settings: dict = field(default_factory=dict)    # AttackConfig fields the variant changes
+    selector_model: str = ""                  # a selector other than checkpoints/crash_selector_<family>
+
+    def name(self) -> str:
+        return f"{self.planner}_{self.selector.replace('+', '_')}" + (f"_{self.variant}" if self.variant else "")
+
+    def label(self) -> str:
+        return f"{self.planner} / {LABELS[self.selector]}" + (f" / {self.variant}" if self.variant else "")
 
 
-def attack(family: str, planner: str, selector: str, count: int, workers: int, k: int | None = None) -> dict:
-    k = PLANNER_K[planner] if k is None else k
-    spec = PLANNERS[planner].format(family=family)
-    config = AttackConfig(selector=selector, replan_every=k)
-    out = run_dir(family, planner, selector, k if k != 20 else None)
-    return run_attacks(spec, ROOT / "data" / "attack" / family, count, config, seed=0, out=out,
-                       traffic=ROOT / "checkpoints" / f"crash_traffic_{family}",
-                       selectors=ROOT / "checkpoints" / f"crash_selector_{family}",
+TABLE1 = [Run(p, s) for p in ("replay", "idm", "riskmap") for s in ("crash", "distance")]
+TABLE3 = [Run("idm", s) for s in ("distance", "distance+mam", "crash-no-mam", "crash")]
+ABLATION = [
+    Run("idm", "crash"),
+    Run("idm", "crash", "full_iterations", {"stop_on_collision": False}),
+    Run("idm", "crash", "k1", {"replan_every": 1}),
+    Run("idm", "crash", "k5", {"replan_every": 5}),
+    Run("idm", "crash", "it400", {"iterations_closed_loop": 400}),
+    Run("idm", "crash", "softmin", {"time_weighting": "softmin"}),
+    Run("idm", "crash", "unrolled_selector", selector_model="runs/crash/selector_{family}_unrolled"),
+]
+PARTS = {"table1": TABLE1, "table3": TABLE3, "ablation": ABLATION}
+
+
+def run_dir(family: str, run: Run) -> Path:
+    return ROOT / "out" / "crash" / family / run.name()
+
+
+def attack(family: str, run: Run, count: int, workers: int) -> dict:
+    spec = PLANNERS[run.planner]
+    spec = spec[family] if isinstance(spec, dict) else spec
+    config = AttackConfig(selector=run.selector, replan_every=PLANNER_K[run.planner], **run.settings)
+    selectors = ROOT / (run.selector_model.format(family=family) or f"checkpoints/crash_selector_{family}")
+    return run_attacks(spec, ROOT / "data" / "attack" / family, count, config, seed=0, out=run_dir(family, run),
+                       traffic=ROOT / "checkpoints" / f"crash_traffic_{family}", selectors=selectors,
                        workers=workers, resume=True, progress=True)
 
 
 def collect() -> None:
     results, lines = {}, []
-    for family in ("highway", "intersection"):
-        for part, runs in (("table1", [(p, s, None) for p, s in TABLE1]),
-                           ("table3", [(p, s, None) for p, s in TABLE3]),
-                           ("k", [("idm", "crash", k) for k in K_VALUES])):
+    for family in FAMILIES:
+        for part, runs in PARTS.items():
             rows = []
-            for planner, selector, swept in runs:
-                k = PLANNER_K[planner] if swept is None else swept
-                attacks = sorted((run_dir(family, planner, selector, k if k != 20 else None) / "attacks").glob("*.json"))
-                if part == "k":        # compare k on the same scenes: those of the smallest sweep run
-                    swept_names = {p.name for p in (run_dir(family, "idm", "crash", K_VALUES[0]) / "attacks").glob("*.json")}
-                    attacks = [p for p in attacks if p.name in swept_names]
+            for run in runs:
+                attacks = sorted((run_dir(family, run) / "attacks").glob("*.json"))
                 if not attacks:
                     continue
-                # Finished or not: every scene attacked so far counts (the table gives the denominator).
                 summary = summarise([json.loads(p.read_text()) for p in attacks])
-                label = f"{planner} / {LABELS[selector]}" + (f" / k={k}" if swept is not None or k != 20 else "")
-                results.setdefault(family, {}).setdefault(part, {})[label] = summary
-                rows.append(table_row(label, summary))
+                results.setdefault(family, {}).setdefault(part, {})[run.label()] = summary
+                rows.append(table_row(run.label(), summary))
             if rows:
                 lines += [f"### {family}: {part}", "", TABLE_HEADER, *rows, ""]
     out = ROOT / "experiments" / "results" / "crash"
@@ -84,25 +110,23 @@ def collect() -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--part", choices=("table1", "table3", "k", "collect"), required=True)
-    parser.add_argument("--family", choices=("highway", "intersection"))
+    parser.add_argument("--part", choices=(*PARTS, "collect"), required=True)
+    parser.add_argument("--family", choices=FAMILIES)
     parser.add_argument("--count", type=int, default=100)
     parser.add_argument("--workers", type=int, default=1)
-    parser.add_argument("--only", default="", help="comma-separated planner:selector pairs to run")
+    parser.add_argument("--only", default="", help="comma-separated planner:selector[:variant] runs")
     args = parser.parse_args()
     if args.part == "collect":
         collect()
         return
+    if args.family is None:
+        parser.error("--family is required with --part " + args.part)
     only = {tuple(x.split(":")) for x in args.only.split(",") if x}
-    if args.part == "k":
-        for k in K_VALUES:
-            if k != PLANNER_K["idm"]:        # that one is the table run itself (a superset)
-                attack(args.family, "idm", "crash", args.count, args.workers, k)
-        return
-    for planner, selector in TABLE1 if args.part == "table1" else TABLE3:
-        if only and (planner, selector) not in only:
+    for run in PARTS[args.part]:
+        key = (run.planner, run.selector) + ((run.variant,) if run.variant else ())
+        if only and key not in only:
             continue
-        attack(args.family, planner, selector, args.count, args.workers)
+        attack(args.family, run, args.count, args.workers)
 
 
 if __name__ == "__main__":

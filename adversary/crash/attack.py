@@ -45,6 +45,7 @@ class AttackConfig:
     iterations_closed_loop: int = 200
     lr: float = 0.05
     stop_on_collision: bool = True
+    time_weighting: str = "sum"         # GenerationConfig.time_weighting
 
     def __post_init__(self) -> None:
         if self.selector not in SELECTORS:
@@ -55,7 +56,7 @@ class AttackConfig:
     def generation(self, closed_loop: bool) -> GenerationConfig:
         return GenerationConfig(iterations=self.iterations_closed_loop if closed_loop else self.iterations_replay,
                                 lr=self.lr, replan_every=self.replan_every,
-                                stop_on_collision=self.stop_on_collision)
+                                stop_on_collision=self.stop_on_collision, time_weighting=self.time_weighting)
 
 
 @dataclass(frozen=True)
@@ -122,7 +123,7 @@ def attack_records(records: list, models: Models, planner, planner_spec: str, co
     dict per record (module docstring). Scenes are independent: batching only saves time.
     `keep_scenes`: an attacked record's dict also holds the final drive's last step as a Scene
     (`final_scene`, not JSON) and the adversary's world position then (`adversary_xy`)."""
-    from adversary.crash.judge import ego_track_2hz, judge, rollout
+    from adversary.crash.judge import collided_with, ego_track_2hz, judge, rollout
 
     started = time.perf_counter()
     b = len(records)
@@ -167,12 +168,15 @@ def attack_records(records: list, models: Models, planner, planner_spec: str, co
         p[i, :items[i].num_agents] = selection(config, models, single, enc_i, z_i, logged_ego_future(single),
                                                np.random.default_rng(seeds[i]))[0]
 
-    def replan(traj: torch.Tensor, scenes: list[int]) -> torch.Tensor:
-        out = []
+    adversary_rows = p.argmax(-1)
+
+    def replan(traj: torch.Tensor, scenes: list[int]) -> tuple[torch.Tensor, list[bool]]:
+        futures, hits = [], []
         for i in scenes:
             _, result = drive(i, traj[i].numpy())
-            out.append(torch.from_numpy(_future_of(_ego_in_scene_frame(items[i], ego_track_2hz(result)[5:]))))
-        return torch.stack(out)
+            futures.append(torch.from_numpy(_future_of(_ego_in_scene_frame(items[i], ego_track_2hz(result)[5:]))))
+            hits.append(collided_with(result, records[i], int(items[i].rows[int(adversary_rows[i])])))
+        return torch.stack(futures), hits
 
     gen = generate(model, batch, p, ego_future, config.generation(closed_loop),
                    replan=replan if closed_loop else None, z_init=z_init)
@@ -196,8 +200,7 @@ def attack_records(records: list, models: Models, planner, planner_spec: str, co
             from adversary.crash.panel import save_attack_panel
 
             save_attack_panel(record, tracks, item.rows[1:], adv_row, final, metrics, panel,
-                              f"{record.scene.env_id} seed {record.scene.scene_seed} episode "
-                              f"{record.scene.episode} | {planner_spec} | {config.selector}")
+                              f"{record.scene.where} | {planner_spec} | {config.selector}")
         out.append({**base, "status": "ok", "adversary_row": adv_row,
                     "adversary_log_id": int(record.agent_ids[adv_row]),
                     "collision": bool(metrics["collision"]), "metrics": metrics,

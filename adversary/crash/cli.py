@@ -34,11 +34,21 @@ def add_parsers(subparsers) -> None:
                    help="a dataset from `riskmap collect` (repeat for several)")
     p.add_argument("--out", required=True, help="run directory (best.safetensors, log.jsonl, summary.json)")
     add_config_options(p, TrainTrafficConfig, "epochs", "batch_size", "lr", "kl_weight", "free_bits",
-                       "max_windows_per_episode", "seed",
+                       "max_windows_per_episode", "seed", "prior_collision_weight", "prior_off_road_weight",
+                       "prior_realism_trains",
                        help={"free_bits": "nats of KL per agent left unpenalised",
                              "max_windows_per_episode": "use at most this many windows of each episode "
-                                                        "(0: all)"},
-                       option_types={"epochs": positive_int, "batch_size": positive_int})
+                                                        "(0: all)",
+                             "prior_collision_weight": "weight of the disc overlap (m, summed over steps and "
+                                                       "pairs, per agent) of one prior sample per scene; "
+                                                       "pairs that overlap in the log are left out (0: off)",
+                             "prior_off_road_weight": "weight of the prior sample's box-corner distance to "
+                                                      "the road (m, summed over corners and steps, per "
+                                                      "agent; agents off-road in the log left out; 0: off)",
+                             "prior_realism_trains": "what the realism terms train: model (every weight) or "
+                                                     "prior (the prior head only)"},
+                       option_types={"epochs": positive_int, "batch_size": positive_int},
+                       choices={"prior_realism_trains": ("model", "prior")})
     p.add_argument("--threads", type=int, default=0, help="torch CPU threads (0: torch's default)")
     p.add_argument("--resume", action="store_true")
     p.add_argument("--quiet", action="store_true")
@@ -59,10 +69,26 @@ def _run_train_selector(args: argparse.Namespace) -> int:
 
 
 def _run_scenes(args: argparse.Namespace) -> int:
-    from adversary.crash.run import record_scenes
+    from adversary.crash.run import record_commonroad_scenes, record_scenes
+    from rasterize.errors import InputError
 
+    if args.commonroad:
+        if args.seed is not None or args.first_episode != 0:
+            raise InputError("--seed and --first-episode choose highway-env episodes; drop them with --commonroad")
+        if args.static_agents:
+            raise InputError("--static-agents adds vehicles to simulated episodes; drop it with --commonroad")
+        index = record_commonroad_scenes(args.commonroad, args.count, Path(args.out), args.t0, args.family,
+                                         resume=args.resume, progress=not args.quiet)
+        print(f"{len(index['scenes'])} scenes in {args.out} ({len(index['skipped'])} vehicles skipped, "
+              f"{len(index['files_left_out'])} files of the same traffic left out)")
+        if len(index["scenes"]) < args.count:
+            print(f"all {index['candidates']} vehicles of the recordings were tried; pass more recordings "
+                  "for more scenes")
+        return 0
+    if args.seed is None or args.family is not None:
+        raise InputError("--env needs --seed N (and takes no --family); pass --seed")
     index = record_scenes(args.env, args.seed, args.count, Path(args.out), args.first_episode, args.t0,
-                          resume=args.resume, progress=not args.quiet)
+                          resume=args.resume, progress=not args.quiet, static_agents=args.static_agents)
     print(f"{len(index['scenes'])} scenes in {args.out} ({len(index['skipped'])} episodes skipped)")
     return 0
 
@@ -75,8 +101,10 @@ def default_models(scenes: Path, traffic: str | None, selectors: str | None) -> 
 
     if traffic is None or selectors is None:
         try:
-            family = family_of_env(json.loads((scenes / INDEX).read_text())["env_id"])
-        except (OSError, ValueError, KeyError):
+            index = json.loads((scenes / INDEX).read_text())
+            # recorded scenes name their family; simulated ones have their env's
+            family = index.get("family") or family_of_env(index["env_id"])
+        except (OSError, ValueError, KeyError, AttributeError):
             raise InputError(f"--scenes {scenes} holds no scene index; make one with `adversary scenes`") from None
         traffic = traffic or f"checkpoints/crash_traffic_{family}"
         selectors = selectors or f"checkpoints/crash_selector_{family}"
@@ -103,6 +131,7 @@ def _run_attack(args: argparse.Namespace) -> int:
 
 
 def add_attack_parsers(subparsers) -> None:
+    from adversary.crash.config import SELECTOR_OBJECTIVES
     from adversary.crash.selection import SELECTORS
 
     p = subparsers.add_parser("train-selector", help="train CRASH's adversarial-agent selection module")
@@ -110,21 +139,40 @@ def add_attack_parsers(subparsers) -> None:
     p.add_argument("--data", action="append", required=True, help="training dataset (repeatable)")
     p.add_argument("--out", required=True)
     add_config_options(p, TrainSelectorConfig, "label_iterations", "max_scenes", "windows_per_episode",
-                       "epochs", "seed",
+                       "epochs", "seed", "objective", "unroll_steps", "unroll_lr", "lr",
+                       help={"lr": "Adam's learning rate for the selector",
+                             "objective": "labels: fit p to each candidate's short-attack loss; unrolled: "
+                                          "minimise the generation loss after --unroll-steps "
+                                          "differentiable steps on the latents, with p in the loss",
+                             "unroll_steps": "gradient steps on the latents unrolled (--objective unrolled)",
+                             "unroll_lr": "their step size eta (--objective unrolled)"},
+                       choices={"objective": SELECTOR_OBJECTIVES},
                        option_types={name: positive_int for name in ("label_iterations", "max_scenes",
-                                                                     "windows_per_episode", "epochs")})
+                                                                     "windows_per_episode", "epochs",
+                                                                     "unroll_steps")})
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--resume", action="store_true")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=_run_train_selector)
 
-    p = subparsers.add_parser("scenes", help="record held-out attack scenes from highway-env episodes")
-    p.add_argument("--env", required=True, help="highway-v0 or intersection-v0")
-    p.add_argument("--seed", type=int, required=True)
+    p = subparsers.add_parser("scenes", help="record held-out attack scenes from highway-env episodes "
+                                             "or CommonRoad recordings")
+    source = p.add_mutually_exclusive_group(required=True)
+    source.add_argument("--env", help="highway-v0 or intersection-v0")
+    source.add_argument("--commonroad", nargs="+", metavar="DIR_OR_FILE",
+                        help="CommonRoad recordings (.xml files or directories): their vehicles are the egos")
+    p.add_argument("--family", default=None,
+                   help="--commonroad: traffic-model family (default: from the file names, USA_US101* -> us101, "
+                        "USA_Lanker* -> lankershim)")
+    p.add_argument("--seed", type=int, default=None, help="--env: the episodes' seed (required)")
     p.add_argument("--count", type=positive_int, required=True)
     p.add_argument("--out", required=True)
     p.add_argument("--first-episode", type=int, default=0)
-    p.add_argument("--t0", type=float, default=2.0, help="attack time in the episode (s)")
+    p.add_argument("--t0", type=float, default=2.0,
+                   help="attack time in the episode (s); --commonroad: after each vehicle's first recorded time")
+    p.add_argument("--static-agents", type=non_negative_int, default=0,
+                   help="--env: parked/stopped vehicles added to each simulated episode (CRASH's "
+                        "Motion-Aware Masking benchmark; 0 to 10)")
     p.add_argument("--resume", action="store_true")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=_run_scenes)

@@ -4,6 +4,8 @@ Scenes: DIR/scene_NNNN.npz (+ .json) written by `record_scenes`, sweeping episod
 `--seed` and skipping those that cannot be attacked (the human crashed before t0 + horizon, or
 no vehicle near the ego); DIR/index.json lists them in order. The index is the commit point: a
 scene counts once it is listed there, and `--resume` goes on from what the index says.
+`record_commonroad_scenes` sweeps the vehicles of CommonRoad recordings instead
+(`adversary.crash.recorded`).
 
 Attacks: OUT/attacks/<scene>.json, one per scene, written atomically as soon as its batch
 finishes (`--batch-size` scenes are optimised together: one Adam step updates all of them, which
@@ -35,7 +37,10 @@ INDEX = "index.json"
 
 
 def record_scenes(env_id: str, seed: int, count: int, out: Path, first_episode: int = 0,
-                  t0_s: float = 2.0, resume: bool = False, progress: bool = True) -> dict:
+                  t0_s: float = 2.0, resume: bool = False, progress: bool = True,
+                  static_agents: int = 0) -> dict:
+    """`static_agents`: parked / stopped vehicles added to every episode
+    (`riskmap.sim.static_agents`), kept in each scene and in the index."""
     from adversary.crash.scenes import AttackScene, record_attack_scene, save_record
 
     out = Path(out)
@@ -44,22 +49,26 @@ def record_scenes(env_id: str, seed: int, count: int, out: Path, first_episode: 
     # --out exists: inside the loop they would only skip one episode after another, forever.
     if seed < 0 or first_episode < 0:
         raise InputError(f"--seed {seed} and --first-episode {first_episode} must be 0 or more")
-    AttackScene(env_id, seed, first_episode, t0_s).check(control_hz=10)
+    AttackScene(env_id, seed, first_episode, t0_s, static_agents=static_agents).check(control_hz=10)
     refuse_unless_resume(out, "scenes", None, resume)
     # The index is the commit point: a scene counts once the index lists it. A run killed before
     # its first index write left scene files but no index; resuming it starts afresh over them.
     index = read_settings(index_path) if resume and index_path.exists() else None
     if index is not None and (index["env_id"], index["seed"], index["t0_s"]) != (env_id, seed, t0_s):
         raise InputError(f"--out {out} holds scenes of {index['env_id']} seed {index['seed']}; choose another --out")
+    # An index from before static vehicles existed holds scenes without any.
+    if index is not None and index.get("static_agents", 0) != static_agents:
+        raise InputError(f"--out {out} holds scenes with --static-agents {index.get('static_agents', 0)}, "
+                         f"not {static_agents}; resume with the same --static-agents or choose another --out")
     lock_out_dir(out)   # one writer (creates it); removes the temporary files a killed writer left
     if index is None:
-        index = {"env_id": env_id, "seed": seed, "t0_s": t0_s, "scenes": [], "skipped": [],
-                 "next_episode": first_episode, **provenance()}
+        index = {"env_id": env_id, "seed": seed, "t0_s": t0_s, "static_agents": static_agents,
+                 "scenes": [], "skipped": [], "next_episode": first_episode, **provenance()}
     while len(index["scenes"]) < count:
         episode = index["next_episode"]
         name = f"scene_{episode:05d}"
         try:
-            record = record_attack_scene(AttackScene(env_id, seed, episode, t0_s))
+            record = record_attack_scene(AttackScene(env_id, seed, episode, t0_s, static_agents=static_agents))
         except InputError as error:
             index["skipped"].append({"episode": episode, "why": str(error)})
         else:
@@ -69,6 +78,56 @@ def record_scenes(env_id: str, seed: int, count: int, out: Path, first_episode: 
                 print(f"{len(index['scenes'])}/{count} scenes (episode {episode})", flush=True)
         index["next_episode"] = episode + 1
         write_json(index_path, index)
+    return index
+
+
+def record_commonroad_scenes(inputs: list[str | Path], count: int, out: Path, t0_s: float = 2.0,
+                             family: str | None = None, resume: bool = False, progress: bool = True) -> dict:
+    """`adversary scenes --commonroad`: recorded vehicles of CommonRoad files as attack scenes
+    (`adversary.crash.recorded`). Files in natural order, one per moment of traffic
+    (`sweep_files`); egos by obstacle id; each attacked `t0_s` after its first recorded time.
+    Scene `episode` is the ego's place in that order (scene_seed 0), so no two scenes of a
+    sweep share (scene_seed, episode); a vehicle that cannot be attacked is listed in the index's
+    "skipped" with why. The index is the commit point, as for `record_scenes`."""
+    from adversary.crash.recorded import SMOOTHING_S, candidates, record_recorded_scene, sweep_files
+    from adversary.crash.scenes import RECORDED_ENV, AttackScene, save_record
+    from riskmap.data.collect_commonroad import scenario_files
+
+    out = Path(out)
+    index_path = out / INDEX
+    AttackScene(RECORDED_ENV, 0, 0, t0_s, recording="check", ego_id=0).check(control_hz=10)
+    refuse_unless_resume(out, "scenes", None, resume)
+    files, family, dropped = sweep_files(scenario_files(inputs, flag="--commonroad"), family)
+    settings = {"env_id": RECORDED_ENV, "family": family, "t0_s": t0_s, "smoothing_s": SMOOTHING_S,
+                "commonroad": [str(p) for p in files], "files_left_out": dropped}
+    index = read_settings(index_path) if resume and index_path.exists() else None
+    if index is not None and {k: index.get(k) for k in settings} != settings:
+        raise InputError(f"--out {out} holds scenes of other recordings or settings; choose another --out")
+    lock_out_dir(out)
+    if index is None:
+        index = {**settings, "seed": 0, "scenes": [], "skipped": [], "next_candidate": 0, **provenance()}
+    todo = candidates(files, t0_s)
+    index["candidates"] = len(todo)
+    while len(index["scenes"]) < count and index["next_candidate"] < len(todo):
+        episode = index["next_candidate"]
+        path, ego_id, t0_ego_s, why = todo[episode]
+        if not why:
+            try:
+                record = record_recorded_scene(AttackScene(RECORDED_ENV, 0, episode, t0_ego_s,
+                                                           recording=str(path), ego_id=ego_id), family=family)
+            except InputError as error:
+                why = str(error)
+        if why:
+            index["skipped"].append({"file": path.name, "ego_id": ego_id, "why": why})
+        else:
+            name = f"scene_{episode:05d}"
+            save_record(record, out / f"{name}.npz")
+            index["scenes"].append(name)
+            if progress and len(index["scenes"]) % 10 == 0:
+                print(f"{len(index['scenes'])}/{count} scenes ({path.name} vehicle {ego_id})", flush=True)
+        index["next_candidate"] = episode + 1
+        write_json(index_path, index)
+    write_json(index_path, index)
     return index
 
 
@@ -121,6 +180,14 @@ def _attack_batch_of(args: tuple) -> list[dict]:
     return _attack_batch(*args)
 
 
+def _interval(successes: int, trials: int) -> list[float] | None:
+    """The 95% Wilson interval [lo, hi] of a rate (None without trials)."""
+    from riskmap.infra.stats import wilson
+
+    ci = wilson(successes, trials)
+    return None if ci is None else [round(ci["lo"], 4), round(ci["hi"], 4)]
+
+
 def summarise(records: list[dict]) -> dict:
     ok = [r for r in records if r["status"] == "ok"]
     hits = [r for r in ok if r["collision"]]
@@ -142,7 +209,9 @@ def summarise(records: list[dict]) -> dict:
         "errors": sum(r["status"] == "error" for r in records),
         "collisions": len(hits),
         "collision_rate": len(hits) / n if n else None,       # over every scene: a scene without a
-        "adversary_off_road_rate": rate(ok, "adversary_off_road"),   # candidate counts as a miss
+        "collision_ci95": _interval(len(hits), n),            # candidate counts as a miss
+        "adversary_off_road_rate": rate(ok, "adversary_off_road"),
+        "adversary_off_road_ci95": _interval(round((rate(ok, "adversary_off_road") or 0) * len(ok)), len(ok)),
         "other_off_road_rate": rate(ok, "other_off_road"),
         "ego_off_road_rate": rate(ok, "off_road"),
         "kinematic_value_mps": float(np.mean(kin)) if kin else None,
@@ -163,13 +232,18 @@ def table_row(label: str, s: dict) -> str:
     def num(v, fmt="{:.2f}"):
         return "–" if v is None else fmt.format(v)
 
-    return (f"| {label} | {s['collisions']}/{s['scenes']} ({pct(s['collision_rate'])}) | "
-            f"{pct(s['adversary_off_road_rate'])} | {pct(s['other_off_road_rate'])} | "
+    def interval(ci):
+        return "" if not ci else f" [{100 * ci[0]:.0f}–{100 * ci[1]:.0f}]"
+
+    return (f"| {label} | {s['collisions']}/{s['scenes']} ({pct(s['collision_rate'])}"
+            f"{interval(s.get('collision_ci95'))}) | "
+            f"{pct(s['adversary_off_road_rate'])}{interval(s.get('adversary_off_road_ci95'))} | "
+            f"{pct(s['other_off_road_rate'])} | "
             f"{num(s['kinematic_value_mps'])} | {pct(s['solution_rate'])} | "
             f"{num(s['seconds_per_scene_median'], '{:.1f}')} |")
 
 
-TABLE_HEADER = ("| run | collision | adv off-road % | other off-road % | kinematic value m/s | "
+TABLE_HEADER = ("| run | collision (%, 95% CI) | adv off-road % | other off-road % | kinematic value m/s | "
                 "solution % | s/scene |\n|---|---|---|---|---|---|---|")
 
 

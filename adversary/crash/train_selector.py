@@ -1,27 +1,39 @@
-"""`adversary train-selector`: fit the ASM with the task-coupled loss on training scenes.
+"""`adversary train-selector`: fit the ASM on training scenes with one of two objectives.
 
-CRASH trains selection and generation jointly through L = L_adv + L_reg, weighted by p. We make
-the coupling explicit and affordable on a CPU: for every training scene and every candidate c we
-run a short generation (`label_iterations` of the full attack objective, p = one-hot(c), against
-the logged ego) and keep its final loss L_c and whether it collided. The selector then minimises
-the expected generation loss under its own distribution,
+CRASH trains selection and generation jointly through L = L_adv + L_reg, weighted by p. The
+traffic model is frozen; the selector sees its context latents Z (after message passing).
+
+`--objective labels` (default) makes the coupling explicit and affordable on a CPU: for every
+training scene and every candidate c we run a short generation (`label_iterations` of the full
+attack objective, p = one-hot(c), against the logged ego) and keep its final loss L_c and whether
+it collided. The selector then minimises the expected generation loss under its own distribution,
 
     L_sel = sum_c p_c * (L_c - mean_c L_c) / (std_c L_c + 1e-6),
 
-so p moves towards the agents whose attack the generator can complete most cheaply. The traffic
-model is frozen; the selector sees its context latents Z (after message passing).
+so p moves towards the agents whose attack the generator can complete most cheaply.
 
-Files in RUN: labels.jsonl (one line per scene, written atomically as each is computed; `--resume`
-keeps them), selector_mam / selector_no_mam (safetensors + sidecar), summary.json. Labelling draws
-nothing from torch's generator, so the selectors start from the same draws whether the labels were
-made now or by a killed run (a resumed run trains the same selectors).
+`--objective unrolled` puts p into the generation loss itself: `unroll_steps` gradient steps on
+the latents from the posterior mean are unrolled differentiably and the selector minimises the
+loss after them, back-propagated through the unroll (adversary/crash/unrolled.py). Each scene's
+loss is divided by its own (detached) magnitude, so that every scene's relative improvement
+counts alike, as the standardised labels make them count. Only the held-out scenes are labelled
+(for the same validation measure).
+
+Files in RUN: run.json (the settings; `--resume` continues only with the same ones), labels.jsonl
+(one line per labelled scene, rewritten atomically as each is computed; `--resume` keeps them;
+every scene with `labels`, the held-out ones with `unrolled`), unrolled_selector_mam.pt /
+unrolled_selector_no_mam.pt (`unrolled` only: weights, optimiser and log, committed atomically
+after every epoch; `--resume` continues from the last one), selector_mam / selector_no_mam
+(safetensors + sidecar naming the objective), summary.json. Labelling draws nothing from torch's
+generator, and the unrolled selectors are initialised and shuffled from generators seeded per
+selector and epoch, so a resumed run trains the same selectors as an uninterrupted one.
 """
 
 from __future__ import annotations
 
 import json
 import time
-from dataclasses import asdict
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -33,9 +45,11 @@ from adversary.crash.features import SceneTensors
 from adversary.crash.generate import GenerationConfig, attack_loss, generate, logged_ego_future
 from adversary.crash.selection import SelectionModule, candidates, distance_weights
 from adversary.crash.train_traffic import load_traffic_model, load_windows, scene_collides
+from adversary.crash.unrolled import unrolled_loss
 from riskmap.infra.atomic import atomic_write, write_json
-from riskmap.infra.checkpoint import load_weights, read_sidecar, save_checkpoint
-from riskmap.infra.rundir import lock_out_dir, refuse_unless_resume
+from riskmap.infra.checkpoint import load_state, load_weights, read_sidecar, save_checkpoint, save_state
+from riskmap.infra.provenance import provenance
+from riskmap.infra.rundir import check_same_settings, lock_out_dir, refuse_unless_resume
 
 CHECKPOINT_KIND = "crash_selector"
 
@@ -114,57 +128,207 @@ def train_selector(traffic_checkpoint: Path, data: list[Path], out: Path,
     for param in model.parameters():
         param.requires_grad_(False)
     train_items, _ = load_windows(data, features, 0.0, config.windows_per_episode)
+    settings = {"config": asdict(config), "traffic_model": str(traffic_checkpoint)}
+    if resume:
+        check_same_settings(out, SETTINGS_FILE, settings, differs="other train-selector settings")
     lock_out_dir(out)   # one writer per run directory (creates it)
+    write_json(out / SETTINGS_FILE, {**settings, **provenance()})
     rng = np.random.default_rng(config.seed)
     items = [train_items[i] for i in sorted(rng.permutation(len(train_items))[: config.max_scenes])]
-    labels_path = out / "labels.jsonl"
+    run = _Run(model, traffic_meta["model"]["hidden"], str(traffic_checkpoint), config, out, progress)
+    train_on = _train_unrolled_pair if config.objective == "unrolled" else _train_label_pair
+    summary, val = train_on(run, items, resume, rng)
+    summary["val_baselines"] = _baseline_picks(model, val, rng)
+    write_json(out / "summary.json", summary)
+    return summary
+
+
+def _train_label_pair(run: _Run, items: list[SceneTensors], resume: bool, rng: np.random.Generator
+                      ) -> tuple[dict, list]:
+    """`--objective labels`: label every scene, fit both selectors; (summary, held-out (item, label))."""
+    labels = _label_all(run, items, resume)
+    kept = [(it, lab) for it, lab in zip(items, labels) if lab is not None]
+    train, val = _split(kept, run.config.val_fraction)
+    summary = _summary(run, len(kept), len(train), len(val))
+    z_train = contexts(run.model, [it for it, _ in train])
+    for mam in (True, False):
+        selector, total = _train_on_labels(run, z_train, [lab for _, lab in train], mam, rng)
+        summary[_name(mam)] = _commit(run, selector, mam, val, {})
+        summary[_name(mam)]["final_train_loss"] = total
+    return summary, val
+
+
+def _train_unrolled_pair(run: _Run, items: list[SceneTensors], resume: bool, rng: np.random.Generator
+                         ) -> tuple[dict, list]:
+    """`--objective unrolled`: label the held-out scenes only, train both selectors through the
+    unroll; (summary, held-out (item, label))."""
+    config = run.config
+    train, held_out = _split([it for it in items if _has_candidates(it)], config.val_fraction)
+    val = [(it, lab) for it, lab in zip(held_out, _label_all(run, held_out, resume)) if lab is not None]
+    summary = _summary(run, len(val), len(train), len(val))
+    for mam in (True, False):
+        selector, log = _train_unrolled(run, train, mam, resume)
+        summary[_name(mam)] = _commit(run, selector, mam, val, {"unroll_steps": config.unroll_steps,
+                                                                "unroll_lr": config.unroll_lr,
+                                                                "last_epoch": log[-1] if log else None})
+        summary[_name(mam)]["final_train_loss"] = log[-1]["loss"] if log else None
+    return summary, val
+
+
+SETTINGS_FILE = "run.json"
+BATCH_SCENES = 16
+UNROLL_BATCH_SCENES = 32     # one unroll of 32 scenes costs about 1.4 of 16 (the decoder is step-serial)
+
+
+@dataclass(frozen=True)
+class _Run:
+    """What every stage of one train-selector run needs."""
+    model: object
+    hidden: int
+    traffic_model: str
+    config: TrainSelectorConfig
+    out: Path
+    progress: bool
+
+
+def _name(mam: bool) -> str:
+    return "selector_mam" if mam else "selector_no_mam"
+
+
+def _summary(run: _Run, labelled: int, train: int, val: int) -> dict:
+    return {"config": asdict(run.config), "traffic_model": run.traffic_model, "objective": run.config.objective,
+            "labelled_scenes": labelled, "train_scenes": train, "val_scenes": val}
+
+
+def _split(kept: list, val_fraction: float) -> tuple[list, list]:
+    """(train, held-out): the last share of the scenes (by order, i.e. by episode) is held out."""
+    cut = round(len(kept) * (1.0 - val_fraction))
+    return kept[:cut], kept[cut:]
+
+
+def _has_candidates(item: SceneTensors) -> bool:
+    """Whether a scene has a non-ego agent (the scenes `label_scene` labels)."""
+    return bool(candidates(collate([item]), mam=False).any())
+
+
+def _label_all(run: _Run, items: list[SceneTensors], resume: bool) -> list[dict | None]:
+    """`label_scene` of every item, kept in RUN/labels.jsonl scene by scene (resumable)."""
+    labels_path = run.out / "labels.jsonl"
     labels: list[dict | None] = []
     if resume and labels_path.exists():
         labels = [json.loads(line) for line in labels_path.read_text().splitlines() if line.strip()]
     started = time.perf_counter()
     for i in range(len(labels), len(items)):
-        labels.append(label_scene(model, items[i], config.label_iterations))
+        labels.append(label_scene(run.model, items[i], run.config.label_iterations))
         # Rewritten whole, atomically: a kill leaves the lines of finished scenes, never half a line.
         atomic_write(labels_path, lambda f: f.write("".join(json.dumps(lab) + "\n" for lab in labels).encode()))
-        if progress and i % 10 == 0:
+        if run.progress and i % 10 == 0:
             print(f"labelled {i + 1}/{len(items)} scenes ({time.perf_counter() - started:.0f} s)", flush=True)
-    kept = [(it, lab) for it, lab in zip(items, labels) if lab is not None]
-    cut = round(len(kept) * (1.0 - config.val_fraction))
-    train, val = kept[:cut], kept[cut:]
-    z_train = contexts(model, [it for it, _ in train])
-    z_val = contexts(model, [it for it, _ in val])
-    summary = {"config": asdict(config), "traffic_model": str(traffic_checkpoint),
-               "labelled_scenes": len(kept), "train_scenes": len(train), "val_scenes": len(val)}
-    for mam in (True, False):
-        selector = SelectionModule(traffic_meta["model"]["hidden"])
-        optimiser = torch.optim.Adam(selector.parameters(), lr=config.lr)
-        targets = [_targets(lab, z.shape[0], mam) for z, (_, lab) in zip(z_train, train)]
-        for epoch in range(config.epochs):
-            order = rng.permutation(len(train))
-            total = 0.0
-            for start in range(0, len(order), 16):
-                loss = sum(_selector_loss(selector, z_train[i], *targets[i]) for i in order[start:start + 16]
-                           if targets[i][0].any())
-                if not torch.is_tensor(loss):
-                    continue
-                optimiser.zero_grad()
-                loss.backward()
-                optimiser.step()
-                total += loss.item()
-        name = "selector_mam" if mam else "selector_no_mam"
-        picks = []
-        with torch.no_grad():
-            for z, (it, lab) in zip(z_val, val):
-                mask = _targets(lab, z.shape[0], mam)[0]
-                picks.append(int(selector(z[None], mask[None])[0].argmax()) if mask.any() else -1)
-        metrics = evaluate_selection(picks, [lab for _, lab in val])
-        summary[name] = {"val": metrics, "final_train_loss": total}
-        save_checkpoint(out / name, selector, {"mam": mam, "hidden": traffic_meta["model"]["hidden"],
-                                               "traffic_model": str(traffic_checkpoint), "val": metrics},
-                        kind=CHECKPOINT_KIND)
-    summary["val_baselines"] = _baseline_picks(model, val, rng)
-    write_json(out / "summary.json", summary)
-    return summary
+    return labels
+
+
+def _train_on_labels(run: _Run, z_train: list[torch.Tensor], labels: list[dict], mam: bool,
+                     rng: np.random.Generator) -> tuple[SelectionModule, float]:
+    """The selector fit to the standardised label losses (module docstring); its last epoch's loss."""
+    selector = SelectionModule(run.hidden)
+    optimiser = torch.optim.Adam(selector.parameters(), lr=run.config.lr)
+    targets = [_targets(lab, z.shape[0], mam) for z, lab in zip(z_train, labels)]
+    total = 0.0
+    for _ in range(run.config.epochs):
+        order = rng.permutation(len(labels))
+        total = 0.0
+        for start in range(0, len(order), BATCH_SCENES):
+            loss = sum(_selector_loss(selector, z_train[i], *targets[i]) for i in order[start:start + BATCH_SCENES]
+                       if targets[i][0].any())
+            if not torch.is_tensor(loss):
+                continue
+            optimiser.zero_grad()
+            loss.backward()
+            optimiser.step()
+            total += loss.item()
+    return selector, total
+
+
+def _state_path(run: _Run, mam: bool) -> Path:
+    return run.out / f"unrolled_{_name(mam)}.pt"
+
+
+def _train_unrolled(run: _Run, train: list[SceneTensors], mam: bool, resume: bool
+                    ) -> tuple[SelectionModule, list[dict]]:
+    """The selector trained through the unrolled generation loss, one atomic commit per epoch."""
+    config = run.config
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(config.seed * 2 + int(not mam))
+        selector = SelectionModule(run.hidden)
+    optimiser = torch.optim.Adam(selector.parameters(), lr=config.lr)
+    log: list[dict] = []
+    if resume and _state_path(run, mam).exists():
+        state = load_state(_state_path(run, mam))
+        selector.load_state_dict(state["selector"])
+        optimiser.load_state_dict(state["optimiser"])
+        log = list(state["log"])
+    started = time.perf_counter()
+    for epoch in range(len(log), config.epochs):
+        order = np.random.default_rng([config.seed, int(mam), epoch]).permutation(len(train))
+        losses = [_unrolled_step(run, selector, optimiser, [train[i] for i in order[s:s + UNROLL_BATCH_SCENES]],
+                                 mam) for s in range(0, len(order), UNROLL_BATCH_SCENES)]
+        done = [v for v in losses if v is not None]
+        log.append({"epoch": epoch, "loss": float(np.mean(done)) if done else None,
+                    "skipped_batches": len(losses) - len(done)})
+        save_state(_state_path(run, mam), {"selector": selector.state_dict(), "optimiser": optimiser.state_dict(),
+                                           "log": log})
+        if run.progress and (epoch % 5 == 0 or epoch == config.epochs - 1):
+            print(f"{_name(mam)} epoch {epoch + 1}/{config.epochs}: unrolled loss {log[-1]['loss']} "
+                  f"({time.perf_counter() - started:.0f} s)", flush=True)
+    return selector, log
+
+
+def _unrolled_step(run: _Run, selector: SelectionModule, optimiser, items: list[SceneTensors],
+                   mam: bool) -> float | None:
+    """One Adam step on a batch of scenes; the batch's mean generation loss after the unroll (None:
+    nothing to learn, or a non-finite loss, which is skipped)."""
+    batch = collate(items)
+    has = candidates(batch, mam).any(-1)
+    if not has.any():
+        return None
+    loss, _ = unrolled_loss(run.model, batch, selector, mam, run.config.unroll_steps, run.config.unroll_lr)
+    relative = (loss / loss.detach().abs().clamp(min=1.0))[has].mean()
+    if not torch.isfinite(relative):
+        return None
+    optimiser.zero_grad()
+    relative.backward()
+    optimiser.step()
+    return loss.detach()[has].mean().item()
+
+
+def _commit(run: _Run, selector: SelectionModule, mam: bool, val: list, extra: dict) -> dict:
+    """Validate the selector on the held-out labels and write RUN/selector_(no_)mam."""
+    picks = []
+    with torch.no_grad():
+        for it, lab in val:
+            z = contexts(run.model, [it])[0]
+            mask = _targets(lab, z.shape[0], mam)[0]
+            picks.append(int(selector(z[None], mask[None])[0].argmax()) if mask.any() else -1)
+    metrics = evaluate_selection(picks, [lab for _, lab in val])
+    unrolled = _val_unrolled_loss(run, selector, [it for it, _ in val], mam)
+    save_checkpoint(run.out / _name(mam), selector,
+                    {"mam": mam, "hidden": run.hidden, "traffic_model": run.traffic_model, "val": metrics,
+                     "objective": run.config.objective, **extra},
+                    kind=CHECKPOINT_KIND)
+    return {"val": metrics, "val_unrolled_loss": unrolled}
+
+
+def _val_unrolled_loss(run: _Run, selector: SelectionModule, items: list[SceneTensors], mam: bool) -> float | None:
+    """Mean generation loss after the unroll over the held-out scenes with candidates (both
+    objectives report it: what the unrolled objective minimises)."""
+    values = []
+    for start in range(0, len(items), BATCH_SCENES):
+        batch = collate(items[start:start + BATCH_SCENES])
+        has = candidates(batch, mam).any(-1)
+        if has.any():
+            loss, _ = unrolled_loss(run.model, batch, selector, mam, run.config.unroll_steps, run.config.unroll_lr)
+            values += loss.detach()[has].tolist()
+    return float(np.mean(values)) if values else None
 
 
 @torch.no_grad()

@@ -2,12 +2,24 @@
 
 Loss per scene: the posterior reconstruction of every agent's known future (mean position
 error in units of `position_scale_m`, heading 1 - cos, speed error) plus beta * KL(q || p),
-averaged over real agents. Validation holds out whole episodes (the last `val_fraction` of each
-dataset's shards). Every epoch ends in one atomic write of RUN/state.pt, the commit point that
-`--resume` continues from: weights, optimiser, both random generators, the log and the best
-weights so far. RUN/log.jsonl (a line per epoch) and RUN/best (safetensors + sidecar, the best
-validation ADE) are derived from it, written after it and again on resume, so a run killed
-anywhere resumes to the files of an uninterrupted one.
+averaged over real agents, plus the realism term when `prior_collision_weight` or
+`prior_off_road_weight` is set (`realism_loss`, STRIVE's prior losses): one reparameterised sample
+of the PRIOR is decoded per scene and its pairwise disc overlaps and off-road corner distances
+(adversary.crash.generate's `collision_penalty` and `off_road_penalty`) are penalised, so that
+the prior, not only the posterior, learns that traffic does not drive into itself or off the
+road. Pairs of agents whose logged futures overlap (the data's own crashes, kept at its rate)
+and agents whose logged future leaves the drivable area are left out of those terms: the prior
+is not taught to be cleaner than the data it models (the off-road term also leaves out agents
+whose log stops before the horizon: they may leave the mapped area).
+
+Validation holds out whole episodes (the last `val_fraction` of each dataset's shards; for
+recorded data whole moments of traffic, `held_out`). Every epoch ends in one
+atomic write of RUN/state.pt, the commit point that `--resume` continues from: weights,
+optimiser, both random generators, the log and the best weights so far. RUN/log.jsonl (a line
+per epoch) and RUN/best (safetensors + sidecar, the best validation ADE) are derived from it,
+written after it and again on resume, so a run killed anywhere resumes to the files of an
+uninterrupted one. The sidecars name the scenario family and raster extent of the data
+(`traffic_model_family`), so that an attack can refuse a model of another family.
 
 Realism metrics (`evaluate_model`), on the validation scenes:
     recon ADE / FDE (m)   posterior mean decoded, against the logged futures of every agent
@@ -21,6 +33,7 @@ Realism metrics (`evaluate_model`), on the validation scenes:
 from __future__ import annotations
 
 import json
+import re
 import time
 from dataclasses import asdict
 from pathlib import Path
@@ -31,7 +44,8 @@ import torch
 from adversary.crash.batch import Batch, collate
 from adversary.crash.config import TrainTrafficConfig
 from adversary.crash.features import FeatureConfig, SceneTensors, scene_tensors
-from adversary.crash.traffic_model import TrafficModel, TrafficModelConfig, kl_normal
+from adversary.crash.generate import _discs, collision_penalty, off_road_penalty
+from adversary.crash.traffic_model import Encoded, TrafficModel, TrafficModelConfig, kl_normal
 from rasterize.errors import InputError
 from rasterize.frames import box_corners
 from rasterize.geometry import boxes_overlap
@@ -40,19 +54,91 @@ from riskmap.infra.checkpoint import load_state, load_weights, read_sidecar, sav
 from riskmap.infra.rundir import lock_out_dir, refuse_unless_resume
 
 CHECKPOINT_KIND = "traffic_cvae"
+# An agent whose logged future puts its box corners this far off the drivable area in all (m,
+# summed over the 4 corners and the valid steps) is off-road in the data: the realism term
+# leaves it alone. Lane polygons do not cover every corner a turning car cuts by a few cm.
+LOGGED_OFF_ROAD_M = 0.5
+
+
+def data_family(roots: list[Path]) -> dict:
+    """{"family", "extent", "sources"} of datasets collected by `riskmap collect`: the scenario
+    family (highway-env's family of the env id, or the recordings' family of a
+    `--from-commonroad` dataset), its raster extent (m) and the env ids. Datasets of several
+    families are refused: a traffic model is of one family."""
+    from rasterize.config import family_of_env
+    from riskmap.data.dataset import load_manifest
+
+    families: dict[str, list[str]] = {}
+    extents, sources = [], []
+    for root in roots:
+        config = load_manifest(Path(root)).get("config", {})
+        source = config.get("env_id")
+        family = config.get("family") or (family_of_env(source) if source else None)
+        if family is None:
+            raise InputError(f"--data {root}: its manifest names no env or family; collect it again "
+                             "with `riskmap collect`")
+        families.setdefault(family, []).append(str(root))
+        extent = config.get("raster", {}).get("extent")
+        if extent not in extents:
+            extents.append(extent)
+        if source not in sources:
+            sources.append(source)
+    if len(families) > 1:
+        listed = "; ".join(f"{f}: {', '.join(r)}" for f, r in sorted(families.items()))
+        raise InputError(f"--data mixes scenario families ({listed}); train one traffic model per family")
+    return {"family": next(iter(families)), "extent": extents[0] if len(extents) == 1 else extents,
+            "sources": sources}
+
+
+def traffic_model_family(path: Path) -> str | None:
+    """The scenario family (highway, intersection, ...) a traffic-model checkpoint `path` (without
+    suffix) was trained on; None for a sidecar written before the family was recorded."""
+    family = read_sidecar(Path(path), kind=CHECKPOINT_KIND).get("family")
+    return None if family is None else str(family)
+
+
+def _natural(name: str) -> list:
+    """Sort key that puts `USA_US101-2` before `USA_US101-10`."""
+    return [(0, int(p), "") if p.isdigit() else (1, 0, p) for p in re.split(r"(\d+)", name)]
+
+
+def held_out(data, val_fraction: float) -> set[int]:
+    """The episodes (shards) of dataset `data` that validate: the last `val_fraction` of its
+    episodes. Recorded data (`--from-commonroad`) is split by group instead (its episodes are
+    demonstrators of shared moments of traffic, named by `group_of`), so that no recorded vehicle
+    is on both sides: walking the groups from the last in natural order, a group validates when
+    the validation windows stay within `val_fraction` of all (else the smallest group alone).
+    Recorded data of a single group is split by episodes like simulated data."""
+    episodes = sorted({data.episode_of(i) for i in range(len(data))})
+    if val_fraction <= 0:
+        return set()
+    groups = {data.episode_of(i): data.group_of(i) for i in range(len(data))}
+    if all(g is not None for g in groups.values()) and len(set(groups.values())) > 1:
+        windows: dict[str, int] = {}
+        for i in range(len(data)):
+            windows[groups[data.episode_of(i)]] = windows.get(groups[data.episode_of(i)], 0) + 1
+        chosen, count = [], 0
+        for name in sorted(windows, key=_natural, reverse=True)[:-1]:     # one group always trains
+            if count + windows[name] <= val_fraction * len(data):
+                chosen.append(name)
+                count += windows[name]
+        if not chosen:
+            chosen = [min(sorted(windows, key=_natural), key=windows.get)]
+        return {ep for ep, g in groups.items() if g in chosen}
+    kept = round(len(episodes) * (1.0 - val_fraction))     # episodes that train
+    return set(episodes[kept:])
 
 
 def load_windows(roots: list[Path], features: FeatureConfig, val_fraction: float,
                  max_per_episode: int = 0) -> tuple[list[SceneTensors], list[SceneTensors]]:
-    """(train, validation) scene tensors of datasets collected by `riskmap collect`."""
+    """(train, validation) scene tensors of datasets collected by `riskmap collect` (validation:
+    `held_out`)."""
     from riskmap.data.dataset import DemoDataset
 
     train, val = [], []
     for root in roots:
         data = DemoDataset(root)
-        episodes = sorted({data.episode_of(i) for i in range(len(data))})
-        kept = round(len(episodes) * (1.0 - val_fraction))     # episodes that train
-        cut = episodes[kept] if val_fraction > 0 and kept < len(episodes) else None
+        validating = held_out(data, val_fraction)
         taken: dict[int, int] = {}
         for i in range(len(data)):
             ep = data.episode_of(i)
@@ -63,7 +149,7 @@ def load_windows(roots: list[Path], features: FeatureConfig, val_fraction: float
                 item = scene_tensors(data.scene(i), features)
             except InputError:
                 continue          # a window without map or history: nothing to learn from
-            (val if cut is not None and ep >= cut else train).append(item)
+            (val if ep in validating else train).append(item)
     if not train:
         raise InputError(f"--data {', '.join(map(str, roots))} gave no usable training windows")
     return train, val
@@ -80,8 +166,91 @@ def reconstruction_loss(model: TrafficModel, batch: Batch, traj: torch.Tensor) -
     return (per_step * valid).sum(-1) / valid.sum(-1).clamp(min=1.0)
 
 
-def training_loss(model: TrafficModel, batch: Batch, kl_weight: float, free_bits: float = 0.0
+def _logged_states(batch: Batch) -> torch.Tensor:
+    """The logged futures [B, N, F, 4] (x, y, heading, speed) of batch.future."""
+    f = batch.future
+    return torch.stack([f[..., 0], f[..., 1], torch.atan2(f[..., 3], f[..., 2]), f[..., 4]], -1)
+
+
+@torch.no_grad()
+def logged_overlaps(batch: Batch) -> torch.Tensor:
+    """[B, N, N] bool: the discs of the two agents' logged futures overlap at a step where both
+    are known (the data's own crashes and near-contacts, as the realism term measures them)."""
+    centres, radius = _discs(_logged_states(batch), batch.sizes)            # [B, N, F, 3, 2]
+    a, c = centres[:, :, None, :, :, None], centres[:, None, :, :, None, :]
+    dist = (a - c).norm(dim=-1)                                              # [B, N, N, F, 3, 3]
+    reach = (radius[:, :, None] + radius[:, None, :]).squeeze(-1)[..., None, None]   # [B, N, N, 1, 1, 1]
+    overlap = ((reach - dist) > 0).flatten(-2).any(-1)                       # [B, N, N, F]
+    both = batch.future_valid[:, :, None] & batch.future_valid[:, None, :]
+    n = both.shape[1]
+    return (overlap & both).any(-1) & ~torch.eye(n, dtype=torch.bool)[None]
+
+
+@torch.no_grad()
+def logged_off_road(batch: Batch) -> torch.Tensor:
+    """[B, N] bool: the agent's logged future is off the drivable area (`LOGGED_OFF_ROAD_M`)."""
+    logged = _logged_states(batch)
+    # Unknown steps take the last known state (for an agent never known: its present, t0).
+    now = batch.past[:, :, -1]
+    last = torch.stack([now[..., 0], now[..., 1], torch.atan2(now[..., 3], now[..., 2]), now[..., 4]], -1)
+    steps = []
+    for t in range(logged.shape[2]):
+        last = torch.where(batch.future_valid[:, :, t, None], logged[:, :, t], last)
+        steps.append(last)
+    logged = torch.stack(steps, 2)
+    b, n = batch.agent_mask.shape
+    out = torch.zeros(b, n, dtype=torch.bool)
+    for k in range(n):          # off_road_penalty averages over the masked agents: one at a time
+        one = torch.zeros(b, n, dtype=torch.bool)
+        one[:, k] = True
+        out[:, k] = off_road_penalty(batch, logged, one) > LOGGED_OFF_ROAD_M
+    return out
+
+
+def realism_loss(model: TrafficModel, batch: Batch, enc, collision_weight: float, off_road_weight: float,
+                 trains: str = "model") -> tuple[torch.Tensor, dict]:
+    """The realism term (module docstring) of one reparameterised prior sample per scene: (loss,
+    parts). Collision: disc overlap (m) summed over the steps and the pairs of real agents that do
+    not overlap in the log; off-road: corner distances (m) summed over corners and steps, for the
+    real agents logged to the horizon that stay on the road in the log; both per real agent of
+    the batch. `trains`: "model" (the gradient reaches every weight) or "prior" (only the prior
+    head's: the context and the decoder are held fixed for it)."""
+    if trains == "prior":
+        mu, logvar = model.prior(enc.context.detach()).chunk(2, dim=-1)
+        enc = Encoded(enc.context.detach(), mu, logvar.clamp(-8.0, 4.0), enc.start.detach())
+    eps = torch.randn_like(enc.prior_mu)
+    z = enc.prior_mu + eps * (0.5 * enc.prior_logvar).exp()
+    if trains == "prior":
+        held = [p for name, p in model.named_parameters() if not name.startswith("prior.") and p.requires_grad]
+        for p in held:
+            p.requires_grad_(False)
+        try:
+            traj = model.decode(batch, enc, z)
+        finally:
+            for p in held:
+                p.requires_grad_(True)
+    else:
+        traj = model.decode(batch, enc, z)
+    agents = batch.agent_mask
+    count = agents.float().sum().clamp(min=1.0)
+    n = agents.shape[1]
+    pair = agents[:, :, None] & agents[:, None, :] & ~torch.eye(n, dtype=torch.bool)[None]
+    pair = pair & ~logged_overlaps(batch)
+    collision = collision_penalty(traj, batch.sizes, pair).sum() / count
+    # Only agents logged to the end of the horizon: one whose log stops may have left the mapped
+    # area (recorded traffic, highway-env's exits), where off the lanes is not off the road.
+    on_road = agents & batch.future_valid.all(-1) & ~logged_off_road(batch)
+    # off_road_penalty is the mean over the masked agents of a scene: back to their sum
+    off_road = (off_road_penalty(batch, traj, on_road) * on_road.float().sum(-1)).sum() / count
+    loss = collision_weight * collision + off_road_weight * off_road
+    return loss, {"prior_collision": float(collision.detach()), "prior_off_road": float(off_road.detach())}
+
+
+def training_loss(model: TrafficModel, batch: Batch, kl_weight: float, free_bits: float = 0.0,
+                  collision_weight: float = 0.0, off_road_weight: float = 0.0, realism_trains: str = "model"
                   ) -> tuple[torch.Tensor, dict]:
+    """The loss of the module docstring and its parts; the realism term only when one of its
+    weights is set (so that without it nothing more is drawn from torch's generator)."""
     enc = model.encode(batch)
     mu, logvar = model.posterior_of(batch, enc)
     z = mu + torch.randn_like(mu) * (0.5 * logvar).exp()
@@ -91,7 +260,11 @@ def training_loss(model: TrafficModel, batch: Batch, kl_weight: float, free_bits
     kl_agent = kl_normal(mu, logvar, enc.prior_mu, enc.prior_logvar)
     kl = (kl_agent * agents).sum() / agents.sum().clamp(min=1.0)
     penalised = (torch.relu(kl_agent - free_bits) * agents).sum() / agents.sum().clamp(min=1.0)
-    return recon + kl_weight * penalised, {"recon": float(recon.detach()), "kl": float(kl.detach())}
+    loss, parts = recon + kl_weight * penalised, {"recon": float(recon.detach()), "kl": float(kl.detach())}
+    if collision_weight > 0 or off_road_weight > 0:
+        realism, more = realism_loss(model, batch, enc, collision_weight, off_road_weight, realism_trains)
+        loss, parts = loss + realism, {**parts, **more}
+    return loss, parts
 
 
 def _batches(items: list, size: int, rng: np.random.Generator | None):
@@ -220,6 +393,7 @@ def train_traffic(data: list[Path], out: Path, config: TrainTrafficConfig = Trai
     refuse_unless_resume(out, "a run", None, resume)
     started = time.perf_counter()
     # The data is read (and bad data refused) before --out exists.
+    family = data_family(data)
     train, val = load_windows(data, features, config.val_fraction, config.max_windows_per_episode)
     lock_out_dir(out)   # one writer per run directory (creates it)
     torch.manual_seed(config.seed)
@@ -227,7 +401,7 @@ def train_traffic(data: list[Path], out: Path, config: TrainTrafficConfig = Trai
     model = TrafficModel(model_config, features.lane_chunks, features.chunk_points)
     optimiser = torch.optim.Adam(model.parameters(), lr=config.lr)
     meta = {"config": asdict(config), "model": model_config.to_dict(), "features": asdict(features),
-            "data": [str(d) for d in data], "train_scenes": len(train), "val_scenes": len(val)}
+            "data": [str(d) for d in data], **family, "train_scenes": len(train), "val_scenes": len(val)}
     first_epoch, best, records, best_weights, best_sidecar = 0, float("inf"), [], None, None
     state_path = out / "state.pt"
     if resume and state_path.exists():
@@ -254,7 +428,9 @@ def train_traffic(data: list[Path], out: Path, config: TrainTrafficConfig = Trai
         model.train()
         losses = []
         for batch in _batches(train, config.batch_size, rng):
-            loss, parts = training_loss(model, batch, config.kl_weight, config.free_bits)
+            loss, parts = training_loss(model, batch, config.kl_weight, config.free_bits,
+                                        config.prior_collision_weight, config.prior_off_road_weight,
+                                        config.prior_realism_trains)
             optimiser.zero_grad()
             loss.backward()
             torch.nn.utils.clip_grad_norm_(model.parameters(), 5.0)
@@ -263,7 +439,11 @@ def train_traffic(data: list[Path], out: Path, config: TrainTrafficConfig = Trai
         metrics = evaluate_model(model, val or train[:64], samples=1, seed=epoch)
         record = {"epoch": epoch, "train_recon": float(np.mean([p["recon"] for p in losses])),
                   "train_kl": float(np.mean([p["kl"] for p in losses])),
+                  **{f"train_{k}": float(np.mean([p[k] for p in losses])) for k in ("prior_collision", "prior_off_road")
+                     if k in losses[0]},
                   "val_recon_ade_m": metrics["recon_ade_m"], "val_recon_fde_m": metrics["recon_fde_m"],
+                  "val_prior_collision_rate": metrics["collision_rate"]["prior"],
+                  "val_prior_off_road_rate": metrics["off_road_rate"]["prior"],
                   "elapsed_s": round(time.perf_counter() - started, 1)}
         if progress:
             print(json.dumps(record), flush=True)

@@ -1,7 +1,7 @@
 """Every number of a campaign report, computed from the result records alone.
 
 Records are grouped by (planner, attack) over all scenes, and by (family, planner, attack).
-Rates carry Wilson intervals, means percentile-bootstrap intervals (adversary.report.stats):
+Rates carry Wilson intervals, means percentile-bootstrap intervals (riskmap.infra.stats):
 
     collision rate           ego collisions / finished jobs
     adversary collision      collisions with the attack's adversary / jobs whose attack had one
@@ -26,7 +26,7 @@ from collections import Counter, defaultdict
 
 import numpy as np
 
-from adversary.report.stats import bootstrap_mean, wilson
+from riskmap.infra.stats import bootstrap_mean, wilson
 from rasterize.config import family_of_env
 from riskmap.sim.metrics import CAMPAIGN_COLLISION_TYPES
 from riskmap.sim.record import current_names

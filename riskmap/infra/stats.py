@@ -1,4 +1,4 @@
-"""Confidence intervals for the report: Wilson intervals for rates, percentile bootstrap for means."""
+"""Confidence intervals (reports, attack tables): Wilson intervals for rates, percentile bootstrap for means."""
 
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """The report's opening paragraph from hand-made by-family rows: who fails where and how often,
 and when the intervals are too wide to rank the planners."""
 
-from adversary.report.stats import wilson
+from riskmap.infra.stats import wilson
 from adversary.report.summary import summary_paragraph
 
 CATEGORIES = {"natural": "baseline", "aggressive_neighbour": "rule"}
