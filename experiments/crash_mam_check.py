@@ -4,6 +4,8 @@
 
 A candidate is a non-ego agent of the window; MAM removes those whose mean past step is at most
 1e-4 m. When it removes none, DS+MAM equals DS and MAM only changes which ASM checkpoint is used.
+The simulated families' scenes carry parked and stopped vehicles (`adversary scenes
+--static-agents 3`); recorded US-101 has whatever stood still in the recording.
 """
 
 from __future__ import annotations
@@ -26,8 +28,10 @@ def main() -> None:
     parser.add_argument("--count", type=int, default=100)
     args = parser.parse_args()
     out = {}
-    for family in ("highway", "intersection"):
+    for family in ("highway", "intersection", "us101"):
         scenes = ROOT / "data" / "attack" / family
+        if not (scenes / "index.json").exists():
+            continue
         names = json.loads((scenes / "index.json").read_text())["scenes"][: args.count]
         masked = total = affected = 0
         for name in names:

@@ -35,7 +35,6 @@ def add_parsers(subparsers) -> None:
     p.add_argument("--out", required=True, help="run directory (best.safetensors, log.jsonl, summary.json)")
     add_config_options(p, TrainTrafficConfig, "epochs", "batch_size", "lr", "kl_weight", "free_bits",
                        "max_windows_per_episode", "seed", "prior_collision_weight", "prior_off_road_weight",
-                       "prior_realism_trains",
                        help={"free_bits": "nats of KL per agent left unpenalised",
                              "max_windows_per_episode": "use at most this many windows of each episode "
                                                         "(0: all)",
@@ -44,11 +43,8 @@ def add_parsers(subparsers) -> None:
                                                        "pairs that overlap in the log are left out (0: off)",
                              "prior_off_road_weight": "weight of the prior sample's box-corner distance to "
                                                       "the road (m, summed over corners and steps, per "
-                                                      "agent; agents off-road in the log left out; 0: off)",
-                             "prior_realism_trains": "what the realism terms train: model (every weight) or "
-                                                     "prior (the prior head only)"},
-                       option_types={"epochs": positive_int, "batch_size": positive_int},
-                       choices={"prior_realism_trains": ("model", "prior")})
+                                                      "agent; agents off-road in the log left out; 0: off)"},
+                       option_types={"epochs": positive_int, "batch_size": positive_int})
     p.add_argument("--threads", type=int, default=0, help="torch CPU threads (0: torch's default)")
     p.add_argument("--resume", action="store_true")
     p.add_argument("--quiet", action="store_true")
@@ -95,17 +91,10 @@ def _run_scenes(args: argparse.Namespace) -> int:
 
 def default_models(scenes: Path, traffic: str | None, selectors: str | None) -> tuple[Path, Path]:
     """The given model paths, else the shipped ones of the scenes' family."""
-    from adversary.crash.run import INDEX
-    from rasterize.config import family_of_env
-    from rasterize.errors import InputError
+    from adversary.crash.run import scenes_family
 
     if traffic is None or selectors is None:
-        try:
-            index = json.loads((scenes / INDEX).read_text())
-            # recorded scenes name their family; simulated ones have their env's
-            family = index.get("family") or family_of_env(index["env_id"])
-        except (OSError, ValueError, KeyError, AttributeError):
-            raise InputError(f"--scenes {scenes} holds no scene index; make one with `adversary scenes`") from None
+        family = scenes_family(scenes)
         traffic = traffic or f"checkpoints/crash_traffic_{family}"
         selectors = selectors or f"checkpoints/crash_selector_{family}"
     return Path(traffic), Path(selectors)

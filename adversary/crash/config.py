@@ -39,10 +39,6 @@ class TrainTrafficConfig:
     # Both per unit of the reconstruction loss; 0 and 0: no prior sample (the old training).
     prior_collision_weight: float = 0.0
     prior_off_road_weight: float = 0.0
-    # What the realism term trains: "model" (every weight, STRIVE's way) or "prior" (the prior
-    # head only: the encoder and the decoder learn from the reconstruction alone, so the
-    # posterior's reconstruction is not traded for the prior's realism).
-    prior_realism_trains: str = "model"
 
     def __post_init__(self) -> None:
         _check(math.isfinite(self.lr) and self.lr > 0, "--lr", self.lr, "a positive number")
@@ -50,8 +46,6 @@ class TrainTrafficConfig:
                "--prior-collision-weight", self.prior_collision_weight, "a finite number >= 0")
         _check(math.isfinite(self.prior_off_road_weight) and self.prior_off_road_weight >= 0,
                "--prior-off-road-weight", self.prior_off_road_weight, "a finite number >= 0")
-        _check(self.prior_realism_trains in ("model", "prior"), "--prior-realism-trains",
-               self.prior_realism_trains, "model or prior")
         _check(math.isfinite(self.kl_weight) and self.kl_weight >= 0, "--kl-weight", self.kl_weight,
                "a finite number >= 0")
         _check(math.isfinite(self.free_bits) and self.free_bits >= 0, "--free-bits", self.free_bits,

@@ -32,6 +32,8 @@ from adversary.crash.batch import Batch, sample_field
 from adversary.crash.traffic_model import Encoded, TrafficModel, log_normal
 from rasterize.frames import box_corners
 
+DISTANCE_EPS_M = 1e-6
+
 
 @dataclass(frozen=True)
 class GenerationConfig:
@@ -83,7 +85,10 @@ def collision_penalty(traj: torch.Tensor, sizes: torch.Tensor, pair_mask: torch.
     b, n = traj.shape[:2]
     a = centres[:, :, None, :, :, None, :]                          # [B, N, 1, F, 3, 1, 2]
     c = centres[:, None, :, :, None, :, :]                          # [B, 1, N, F, 1, 3, 2]
-    dist = (a - c).norm(dim=-1)                                     # [B, N, N, F, 3, 3]
+    # sqrt(|d|^2 + eps^2), not |d|: a disc's distance to itself (and between padded agents) is
+    # exactly 0, where |d| has no second derivative (NaN when the selector is trained through
+    # unrolled steps of this loss, adversary.crash.unrolled); eps moves a distance by at most 1e-6 m.
+    dist = ((a - c).pow(2).sum(-1) + DISTANCE_EPS_M ** 2).sqrt()    # [B, N, N, F, 3, 3]
     reach = radius[:, :, None, :, :, None] + radius[:, None, :, :, :, None]
     overlap = torch.relu(reach.view(b, n, n, 1, 1, 1) - dist).amax(dim=(-1, -2))      # [B, N, N, F]
     return (overlap.sum(-1) * pair_mask.float()).sum((-1, -2)) / 2.0

@@ -89,7 +89,7 @@ def record_commonroad_scenes(inputs: list[str | Path], count: int, out: Path, t0
     Scene `episode` is the ego's place in that order (scene_seed 0), so no two scenes of a
     sweep share (scene_seed, episode); a vehicle that cannot be attacked is listed in the index's
     "skipped" with why. The index is the commit point, as for `record_scenes`."""
-    from adversary.crash.recorded import SMOOTHING_S, candidates, record_recorded_scene, sweep_files
+    from adversary.crash.recorded import SMOOTHING_S, candidates, sweep_files, sweep_scenes
     from adversary.crash.scenes import RECORDED_ENV, AttackScene, save_record
     from riskmap.data.collect_commonroad import scenario_files
 
@@ -108,15 +108,9 @@ def record_commonroad_scenes(inputs: list[str | Path], count: int, out: Path, t0
         index = {**settings, "seed": 0, "scenes": [], "skipped": [], "next_candidate": 0, **provenance()}
     todo = candidates(files, t0_s)
     index["candidates"] = len(todo)
-    while len(index["scenes"]) < count and index["next_candidate"] < len(todo):
-        episode = index["next_candidate"]
-        path, ego_id, t0_ego_s, why = todo[episode]
-        if not why:
-            try:
-                record = record_recorded_scene(AttackScene(RECORDED_ENV, 0, episode, t0_ego_s,
-                                                           recording=str(path), ego_id=ego_id), family=family)
-            except InputError as error:
-                why = str(error)
+    # The sweep tries a candidate only when it is asked for the next one: stop asking at `count`.
+    sweep = sweep_scenes(files, family, t0_s, index["next_candidate"], todo)
+    for episode, path, ego_id, _, record, why in (sweep if len(index["scenes"]) < count else ()):
         if why:
             index["skipped"].append({"file": path.name, "ego_id": ego_id, "why": why})
         else:
@@ -127,8 +121,34 @@ def record_commonroad_scenes(inputs: list[str | Path], count: int, out: Path, t0
                 print(f"{len(index['scenes'])}/{count} scenes ({path.name} vehicle {ego_id})", flush=True)
         index["next_candidate"] = episode + 1
         write_json(index_path, index)
+        if len(index["scenes"]) >= count:
+            break
     write_json(index_path, index)
     return index
+
+
+def scenes_family(scenes_dir: Path) -> str:
+    """The traffic-model family of a scene directory: recorded scenes name theirs, simulated ones
+    have their env's."""
+    from rasterize.config import family_of_env
+
+    try:
+        index = json.loads((Path(scenes_dir) / INDEX).read_text())
+        return index.get("family") or family_of_env(index["env_id"])
+    except (OSError, ValueError, KeyError, AttributeError):
+        raise InputError(f"--scenes {scenes_dir} holds no scene index; make one with `adversary scenes`") from None
+
+
+def check_traffic_family(traffic: Path, scenes_dir: Path) -> None:
+    """A traffic model trained on another family (its sidecar says which) would generate
+    futures for roads and speeds it never saw: refused before any work."""
+    from adversary.crash.train_traffic import traffic_model_family
+
+    trained, wanted = traffic_model_family(Path(traffic)), scenes_family(scenes_dir)
+    if trained is not None and trained != wanted:
+        raise InputError(f"--traffic-model {traffic} was trained on {trained} windows, the scenes in "
+                         f"{scenes_dir} are {wanted}; pass checkpoints/crash_traffic_{wanted} or train one "
+                         "with `adversary train-traffic`")
 
 
 def scene_paths(scenes_dir: Path, count: int) -> list[Path]:
@@ -259,6 +279,7 @@ def run_attacks(planner_spec: str, scenes_dir: Path, count: int, config: AttackC
         load_record(path)
     make_planner(planner_spec, seed=seed)          # a bad SPEC fails here, before any work
     load_models(Path(traffic), Path(selectors) if selectors else None)
+    check_traffic_family(Path(traffic), scenes_dir)
     attacks_dir = out / "attacks"
     meta = {"planner": planner_spec, "scenes": str(scenes_dir), "count": count, "config": asdict(config),
             "seed": seed, "traffic_model": str(traffic), "selector_model": str(selectors) if selectors else None}
