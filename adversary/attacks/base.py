@@ -26,7 +26,9 @@ An attack module defines its `AttackEntry` (or several, `ENTRIES`) and imports o
 `adversary.attacks.registry` imports the attack modules (one way) and answers every lookup by name.
 An entry either makes episode hooks (`factory`; the job drives its scene with them,
 `adversary.attacks.episode.drive_with_hooks`) or runs the whole job itself (`run_job`: CRASH on the
-recorded scene, a search then the replay of its most critical scenario).
+recorded scene, a search then the replay of its most critical scenario). Jobs on a recorded
+scenario family (scenes cut from CommonRoad recordings, adversary.attacks.recorded) run through
+`run_recorded`; an attack without one runs on highway-env families only.
 """
 
 from __future__ import annotations
@@ -59,6 +61,10 @@ class AttackEntry:
     summary: str                           # one line for the report
     factory: Callable[[Any, int], Attack] | None = None   # (params, seed) -> hooks for one episode
     run_job: JobRunner | None = None       # runs a whole job instead of hooks
+    # Runs a job on a recorded scenario family (adversary.attacks.recorded; the job's `scene` is
+    # a RecordedScene). None: the attack needs a highway-env world, and a campaign refuses it on
+    # recorded families.
+    run_recorded: JobRunner | None = None
 
     def __post_init__(self) -> None:
         if self.category not in CATEGORIES:

@@ -10,7 +10,10 @@ A job (planner, env, scene seed, episode) records the human's episode up to t0 +
 (adversary.crash.scenes.record_attack_scene), runs one CRASH attack on it with the job's planner
 (adversary.crash.attack.attack_records) and maps the judge's metrics onto the campaign record
 (`crash_record`). Models are read from `traffic_model` / `selector_model`, where `{family}` stands
-for the job's scenario family (highway, intersection); the defaults are the shipped checkpoints.
+for the job's scenario family (highway, intersection, or a recorded family such as us101); the
+defaults are the shipped checkpoints. On a recorded scenario family (adversary.attacks.recorded)
+the scene is the job's recorded one, cut as `adversary scenes --commonroad` cuts it; its attack
+time is the family's `t0` (`t0_s` here applies to highway-env scenes only).
 
 Differences to the episode attacks, all visible in the record:
 - the episode is t0 + 6 s long (8 s by default) at 10 Hz with a plan every 0.5 s, CRASH's own
@@ -37,7 +40,7 @@ import numpy as np
 
 from adversary.attacks.base import AttackEntry
 from adversary.attacks.episode import RecordingPlanner, attack_seed, job_fields, npz_bytes, scene_arrays
-from rasterize.config import family_of_env
+from adversary.attacks.recorded import job_family, scene_record
 from rasterize.errors import InputError
 from riskmap.infra.config_mapping import require
 from riskmap.registry import cached_planner
@@ -81,7 +84,7 @@ class CrashAttackParams:
 
     def paths(self, env_id: str) -> tuple[Path, Path | None]:
         """(traffic model, selector dir or None when the selector needs none) for an env."""
-        family = family_of_env(env_id)
+        family = job_family(env_id)
         selector = (Path(self.selector_model.format(family=family))
                     if self.selector in LEARNED_SELECTORS else None)
         return Path(self.traffic_model.format(family=family)), selector
@@ -192,9 +195,12 @@ def crash_job(job) -> tuple[dict, bytes | None]:
     from adversary.crash.scenes import AttackScene, record_attack_scene
 
     params: CrashAttackParams = job.attack_params
-    scene = AttackScene(job.env_id, job.scene_seed, job.episode, params.t0_s)
+    recorded = getattr(job, "scene", None)
+    scene = (recorded.attack_scene() if recorded is not None
+             else AttackScene(job.env_id, job.scene_seed, job.episode, params.t0_s))
     try:
-        record = record_attack_scene(scene)   # 10 Hz: CRASH's judge drives at its own rates
+        # 10 Hz: CRASH's judge drives at its own rates
+        record = scene_record(recorded) if recorded is not None else record_attack_scene(scene)
     except InputError as error:
         return _not_attacked(str(error), {"selector": params.selector}), None
     planner = cached_planner(job.planner, job.planner_seed)
@@ -215,4 +221,4 @@ def crash_job(job) -> tuple[dict, bytes | None]:
 ENTRY = AttackEntry("crash", CrashAttackParams, "selection",
                     "CRASH: a selector picks the adversary in the recorded scene, the traffic model "
                     "generates its future against the planner (closed loop, replanned every k iterations)",
-                    run_job=crash_job)
+                    run_job=crash_job, run_recorded=crash_job)

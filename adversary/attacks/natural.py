@@ -1,10 +1,13 @@
-"""`natural`: the planner drives the unmodified episode of its seed (category baseline)."""
+"""`natural`: the planner drives the unmodified episode of its seed (category baseline); on a
+recorded scenario family, the recorded scene with the ego handed to the planner at t0
+(adversary.attacks.recorded.natural_recorded_job)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 from adversary.attacks.base import AttackEntry
+from adversary.attacks.recorded import natural_recorded_job
 
 
 @dataclass(frozen=True)
@@ -23,5 +26,6 @@ class NaturalEpisode:
 
 
 ENTRY = AttackEntry("natural", NaturalParams, "baseline",
-                    "the unmodified highway-env episode of the scene seed",
-                    factory=lambda params, seed: NaturalEpisode())
+                    "the unmodified episode: highway-env's of the scene seed, or the recorded scene "
+                    "with the ego handed to the planner at t0",
+                    factory=lambda params, seed: NaturalEpisode(), run_recorded=natural_recorded_job)

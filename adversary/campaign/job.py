@@ -8,7 +8,8 @@ in which order jobs run, so a resumed or distributed campaign gives the same num
 The attack's entry decides how the job runs (adversary.attacks.base): an attack with episode
 hooks drives the job's scene with them (`drive_with_hooks`); the others run the whole job
 themselves (search attacks: a seeded scenario search, then the replay of its most critical
-scenario; `crash`: CRASH on the job's recorded scene).
+scenario; `crash`: CRASH on the job's recorded scene). A job of a recorded scenario family
+(`scene`: a RecordedScene, env id `commonroad:<family>`) runs through the entry's `run_recorded`.
 """
 
 from __future__ import annotations
@@ -22,7 +23,9 @@ from dataclasses import dataclass
 
 from adversary.attacks.episode import drive_with_hooks
 from adversary.attacks.monitor import SafetyConfig
+from adversary.attacks.recorded import RecordedScene
 from adversary.attacks.registry import attack_entry
+from rasterize.errors import InputError
 from riskmap.infra.config_mapping import to_plain
 
 
@@ -45,11 +48,19 @@ class Job:
     planner_seed: int
     budget: Budget
     safety: SafetyConfig
+    scene: RecordedScene | None = None    # a recorded family's scene (env_id commonroad:<family>)
 
     @property
     def job_id(self) -> str:
-        """Readable and unique: the key fields, then a hash of every field."""
-        digest = hashlib.sha1(json.dumps(to_plain(self), sort_keys=True).encode()).hexdigest()[:10]
+        """Readable and unique: the key fields, then a hash of every field. A highway-env job's
+        hash leaves out the (empty) scene, so ids from before recorded families stay; a recorded
+        scene enters by its recording's file name, so moving the recordings keeps the ids."""
+        plain = to_plain(self)
+        if self.scene is None:
+            del plain["scene"]
+        else:
+            plain["scene"]["recording"] = self.scene.describe()["recording"]
+        digest = hashlib.sha1(json.dumps(plain, sort_keys=True).encode()).hexdigest()[:10]
         slug = re.sub(r"[^A-Za-z0-9]+", "-", f"{self.planner}_{self.env_id}_s{self.scene_seed}"
                       f"e{self.episode}_{self.attack}").strip("-")
         return f"{slug[-80:]}-{digest}"
@@ -59,7 +70,8 @@ class Job:
         return {"job_id": self.job_id, "planner": self.planner, "env_id": self.env_id,
                 "scene_seed": self.scene_seed, "episode": self.episode, "attack": self.attack,
                 "attack_name": self.attack_name, "attack_category": entry.category,
-                "attack_params": to_plain(self.attack_params)}
+                "attack_params": to_plain(self.attack_params),
+                **({} if self.scene is None else self.scene.describe())}
 
 
 def error_result(job: Job, error: BaseException, trace: str = "") -> dict:
@@ -78,8 +90,14 @@ def run_job(job: Job) -> dict:
 
         torch.set_num_threads(1)
         entry = attack_entry(job.attack_name)
-        record, artifact = (entry.run_job(job) if entry.run_job is not None
-                            else drive_with_hooks(job, entry.factory))
+        if job.scene is not None:
+            if entry.run_recorded is None:
+                raise InputError(f"attack {job.attack_name!r} needs a highway-env world; it cannot run "
+                                 f"on the recorded family {job.env_id}")
+            record, artifact = entry.run_recorded(job)
+        else:
+            record, artifact = (entry.run_job(job) if entry.run_job is not None
+                                else drive_with_hooks(job, entry.factory))
         result = {"record": {**job.describe(), "status": "ok", "error": None, **record},
                   "artifact": artifact}
     except Exception as error:  # noqa: BLE001  (a failing job is recorded and the campaign goes on)

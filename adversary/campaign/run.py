@@ -16,7 +16,6 @@ from adversary.campaign.config import CampaignConfig
 from adversary.campaign.store import ResultStore
 from rasterize.errors import InputError
 from riskmap.infra.atomic import write_json
-from riskmap.infra.config_mapping import to_plain
 from riskmap.infra.provenance import provenance
 from riskmap.infra.rundir import lock_out_dir
 
@@ -42,14 +41,14 @@ def check_planners(config: CampaignConfig) -> None:
 def check_attack_models(config: CampaignConfig) -> None:
     """Every checkpoint an attack needs on its scenario families exists (e.g. the crash attack's
     traffic models and selectors) before any job starts."""
-    envs = sorted({family.env for family in config.scenarios})
+    envs = sorted(set(config.env_ids()))
     for attack, (_name, params) in zip(config.attacks, config.attack_params().values()):
         if hasattr(params, "check_envs"):
             params.check_envs([env for env in envs if attack.applies_to(env)])
 
 
 def _campaign_meta(config: CampaignConfig, config_text: str | None) -> dict:
-    return {"config": to_plain(config), "config_text": config_text,
+    return {"config": config.plain(), "config_text": config_text,
             "jobs": [job.job_id for job in config.jobs()]}
 
 

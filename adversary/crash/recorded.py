@@ -240,6 +240,25 @@ def candidates(files: list[Path], t0_after_s: float) -> list[tuple[Path, int, fl
     return out
 
 
+def sweep_scenes(files: list[Path], family: str, t0_after_s: float, start: int = 0,
+                 todo: list[tuple[Path, int, float, str]] | None = None):
+    """The sweep's candidates (`candidates(files, t0_after_s)`, or `todo`) from index `start` on,
+    in order, each tried as an attack scene; nothing is written. Yields (index, file, obstacle id,
+    attack time, SceneRecord or None, why not: "" for a scene). Scene `episode` is the candidate's
+    index (scene_seed 0), as `adversary scenes --commonroad` and stress-test campaigns number them."""
+    todo = candidates(files, t0_after_s) if todo is None else todo
+    for index in range(start, len(todo)):
+        path, ego_id, t0_s, why = todo[index]
+        record = None
+        if not why:
+            try:
+                record = record_recorded_scene(AttackScene(RECORDED_ENV, 0, index, t0_s, recording=str(path),
+                                                           ego_id=ego_id), family=family)
+            except InputError as error:
+                why = str(error)
+        yield index, path, ego_id, t0_s, record, why
+
+
 # ---- the closed loop --------------------------------------------------------------------------------
 
 class AttackWorld(CommonRoadWorld):
@@ -363,4 +382,4 @@ def rollout_recorded(record: SceneRecord, log: HumanLog, planner, planner_spec: 
 
 
 __all__ = ["RECORDED_ENV", "AttackWorld", "candidates", "log_traffic", "record_recorded_scene", "recorded_log",
-           "recording_family", "recording_traffic", "rollout_recorded", "sweep_files"]
+           "recording_family", "recording_traffic", "rollout_recorded", "sweep_files", "sweep_scenes"]

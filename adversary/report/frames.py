@@ -20,7 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from rasterize.config import RasterConfig, raster_config_for_env
+from adversary.attacks.recorded import job_raster
+from rasterize.config import RasterConfig
 from rasterize.frames import box_corners, ego_from_world, ego_pose, pixel_from_ego
 from rasterize.raster import rasterize_scene
 from rasterize.scene import Scene
@@ -108,7 +109,7 @@ def scene_at(final: Scene, index: int, history_s: float) -> Scene:
 
 # --------------------------------------------------------------------------------- tiles
 def _raster(env_id: str, size: int) -> RasterConfig:
-    return raster_config_for_env(env_id, size, size)
+    return job_raster(env_id, size, size)
 
 
 def bev_tile(scene: Scene, raster: RasterConfig, adversary: int = -1) -> np.ndarray:

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from adversary.attacks.recorded import job_raster
 from adversary.report.frames import load_artifact, scene_at
-from rasterize.config import raster_config_for_env
 from rasterize.raster import rasterize_scene
 from riskmap.figures.panels import raster_to_rgb
 
@@ -84,7 +84,7 @@ def gallery_panel(artifact: Path, env_id: str, out_dir: Path, stem: str, title: 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    raster = raster_config_for_env(env_id, 160, 160)
+    raster = job_raster(env_id, 160, 160)
     final = data.final
     fig, axes = plt.subplots(1, 4, figsize=(17, 4.3), dpi=90)
     plan = data.plan

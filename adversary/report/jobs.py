@@ -30,8 +30,11 @@ def job_page(job_id: str) -> str:
 
 
 def job_title(record: dict) -> str:
-    return (f"{short_spec(record['planner'])} | {record['env_id']} seed {record['scene_seed']} "
-            f"episode {record['episode']} | {record['attack']}")
+    if record.get("recording"):      # a recorded family's scene: its recording and vehicle
+        scene = f"{record['env_id']} {Path(record['recording']).stem} vehicle {record['ego_id']}"
+    else:
+        scene = f"{record['env_id']} seed {record['scene_seed']} episode {record['episode']}"
+    return f"{short_spec(record['planner'])} | {scene} | {record['attack']}"
 
 
 def outcome(record: dict) -> str:

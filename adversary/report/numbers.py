@@ -1,6 +1,7 @@
 """Every number of a campaign report, computed from the result records alone.
 
-Records are grouped by (planner, attack) over all scenes, and by (family, planner, attack).
+Records are grouped by (planner, attack) over all scenes, and by (family, planner, attack); a
+family is highway-env's (highway, intersection, ...) or a recorded one's (us101, ...).
 Rates carry Wilson intervals, means percentile-bootstrap intervals (riskmap.infra.stats):
 
     collision rate           ego collisions / finished jobs
@@ -26,8 +27,8 @@ from collections import Counter, defaultdict
 
 import numpy as np
 
+from adversary.attacks.recorded import job_family
 from riskmap.infra.stats import bootstrap_mean, wilson
-from rasterize.config import family_of_env
 from riskmap.sim.metrics import CAMPAIGN_COLLISION_TYPES
 from riskmap.sim.record import current_names
 
@@ -155,7 +156,7 @@ def report_numbers(records: list[dict], gallery: int) -> tuple[dict, dict]:
     older campaigns are read under today's names (riskmap.sim.record.current_names)."""
     records = [current_names(r) for r in records]
     for r in records:
-        r.setdefault("family", family_of_env(r["env_id"]))
+        r.setdefault("family", job_family(r["env_id"]))
     comparison, timing_rows = _rows(records, ("planner", "attack"))
     by_family, _ = _rows(records, ("family", "planner", "attack"))
     selection = [r for r in records if r["attack_category"] == "selection"]
@@ -171,9 +172,11 @@ def report_numbers(records: list[dict], gallery: int) -> tuple[dict, dict]:
         "search": _rows(search, ("attack", "planner"))[0] if search else None,
         "search_history": _search_history(records),
         "guard": _guard_pairs(comparison) or None,
-        "worst": [{k: r[k] for k in ("job_id", "planner", "env_id", "scene_seed", "episode", "attack",
-                                     "collided", "collided_with_adversary", "collision_type",
-                                     "kinematic_mps", "safety_pct", "distance_m")}
+        "worst": [{**{k: r[k] for k in ("job_id", "planner", "env_id", "scene_seed", "episode", "attack",
+                                        "collided", "collided_with_adversary", "collision_type",
+                                        "kinematic_mps", "safety_pct", "distance_m")},
+                   # a recorded family's scene: its recording and vehicle
+                   **{k: r[k] for k in ("recording", "ego_id") if k in r}}
                   for r in worst_scenes(records, gallery)],
         "failures": [{"job_id": r["job_id"], "error": r["error"]}
                      for r in records if r["status"] != "ok"],

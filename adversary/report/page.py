@@ -142,7 +142,9 @@ def make_report(campaign_dir: Path, out_dir: Path | None = None) -> dict:
     jobs = [{"job_id": r["job_id"], "page": job_page(r["job_id"]), "planner": r["planner"],
              "env_id": r["env_id"], "scene_seed": r["scene_seed"], "episode": r["episode"],
              "attack": r["attack"], "status": r["status"], "outcome": outcome(current_names(r)),
-             "animated": bool(media[r["job_id"]]["gif"])} for r in records]
+             "animated": bool(media[r["job_id"]]["gif"]),
+             # a recorded family's scene: its recording, vehicle and attack time
+             **{k: r[k] for k in ("recording", "ego_id", "t0_s") if k in r}} for r in records]
     report["pages"] = {j["job_id"]: j["page"] for j in jobs}
     write_json(out_dir / "report.json", report)
     env = _environment()

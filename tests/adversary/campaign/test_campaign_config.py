@@ -50,4 +50,6 @@ def test_shipped_campaign_configs_validate():
 
     root = Path(__file__).resolve().parents[3] / "experiments" / "campaigns"
     for path in sorted(root.glob("*.yaml")):
+        if path.name == "recorded.yaml":     # the user's CommonRoad files: test_recorded_family.py
+            continue
         assert load_campaign(path).jobs()
