@@ -19,7 +19,7 @@ from riskmap.registry import cached_planner
 
 FIXTURES = Path(__file__).resolve().parents[2] / "fixtures" / "commonroad"
 RECORDING = FIXTURES / "USA_US101-4_1_T-1.xml"     # 10 s; 8 vehicles recorded over 0-8 s
-TRAFFIC = "checkpoints/crash_traffic_highway"
+TRAFFIC = "checkpoints/crash_traffic_us101"        # trained on recorded US-101 windows
 EMPTY = np.zeros((0, 12, 6))
 
 
@@ -182,6 +182,11 @@ def test_attack_runs_on_recorded_scenes(tmp_path):
     scenes = tmp_path / "scenes"
     record_commonroad_scenes([str(RECORDING)], 1, scenes, progress=False)
     config = AttackConfig(selector="nearest", iterations_closed_loop=4, replan_every=2)
+    # A traffic model of another family is refused before any work, in one line naming the fix.
+    with pytest.raises(InputError, match="trained on highway windows.*crash_traffic_us101"):
+        run_attacks("idm", scenes, 1, config, 0, tmp_path / "wrong", "checkpoints/crash_traffic_highway", None,
+                    progress=False)
+    assert not (tmp_path / "wrong").exists()
     summary = run_attacks("idm", scenes, 1, config, 0, tmp_path / "attack", TRAFFIC, None, progress=False)
     [path] = (tmp_path / "attack" / "attacks").glob("*.json")
     result = json.loads(path.read_text())
