@@ -28,6 +28,8 @@ Realism metrics (`evaluate_model`), on the validation scenes:
                           for prior samples and for the logged futures (the data's own rate)
     off-road rate         share of agents with more than 5% of the box off the drivable area at
                           some step (box sampled on a 5 x 3 grid of points), same two columns
+    *_logged_steps        both rates with the model's trajectories counted only at the steps
+                          where each agent is in the log (agents that leave before the horizon)
 """
 
 from __future__ import annotations
@@ -45,7 +47,7 @@ from adversary.crash.batch import Batch, collate
 from adversary.crash.config import TrainTrafficConfig
 from adversary.crash.features import FeatureConfig, SceneTensors, scene_tensors
 from adversary.crash.generate import _discs, collision_penalty, off_road_penalty
-from adversary.crash.traffic_model import Encoded, TrafficModel, TrafficModelConfig, kl_normal
+from adversary.crash.traffic_model import TrafficModel, TrafficModelConfig, kl_normal
 from rasterize.errors import InputError
 from rasterize.frames import box_corners
 from rasterize.geometry import boxes_overlap
@@ -60,11 +62,27 @@ CHECKPOINT_KIND = "traffic_cvae"
 LOGGED_OFF_ROAD_M = 0.5
 
 
+def _recorded_family(config: dict) -> str | None:
+    """The traffic-model family of a `--from-commonroad` dataset's recordings (their site, as
+    `adversary.crash.recorded.recording_family` names the attack scenes': us101, lankershim),
+    or None for a site it does not know."""
+    from adversary.crash.recorded import recording_family
+
+    names = set()
+    for name, *_ in config.get("files", ()):
+        try:
+            names.add(recording_family(name))
+        except InputError:
+            return None
+    return names.pop() if len(names) == 1 else None
+
+
 def data_family(roots: list[Path]) -> dict:
     """{"family", "extent", "sources"} of datasets collected by `riskmap collect`: the scenario
-    family (highway-env's family of the env id, or the recordings' family of a
-    `--from-commonroad` dataset), its raster extent (m) and the env ids. Datasets of several
-    families are refused: a traffic model is of one family."""
+    family (highway-env's family of the env id; for a `--from-commonroad` dataset the recorded
+    site's, e.g. us101, as the attack names recorded scenes, else the recordings' raster family),
+    its raster extent (m) and the env ids. Datasets of several families are refused: a traffic
+    model is of one family."""
     from rasterize.config import family_of_env
     from riskmap.data.dataset import load_manifest
 
@@ -73,7 +91,9 @@ def data_family(roots: list[Path]) -> dict:
     for root in roots:
         config = load_manifest(Path(root)).get("config", {})
         source = config.get("env_id")
-        family = config.get("family") or (family_of_env(source) if source else None)
+        family = config.get("family") or (family_of_env(source) if source and source != "commonroad" else None)
+        if source == "commonroad":
+            family = _recorded_family(config) or family
         if family is None:
             raise InputError(f"--data {root}: its manifest names no env or family; collect it again "
                              "with `riskmap collect`")
@@ -207,30 +227,15 @@ def logged_off_road(batch: Batch) -> torch.Tensor:
     return out
 
 
-def realism_loss(model: TrafficModel, batch: Batch, enc, collision_weight: float, off_road_weight: float,
-                 trains: str = "model") -> tuple[torch.Tensor, dict]:
+def realism_loss(model: TrafficModel, batch: Batch, enc, collision_weight: float, off_road_weight: float
+                 ) -> tuple[torch.Tensor, dict]:
     """The realism term (module docstring) of one reparameterised prior sample per scene: (loss,
     parts). Collision: disc overlap (m) summed over the steps and the pairs of real agents that do
     not overlap in the log; off-road: corner distances (m) summed over corners and steps, for the
     real agents logged to the horizon that stay on the road in the log; both per real agent of
-    the batch. `trains`: "model" (the gradient reaches every weight) or "prior" (only the prior
-    head's: the context and the decoder are held fixed for it)."""
-    if trains == "prior":
-        mu, logvar = model.prior(enc.context.detach()).chunk(2, dim=-1)
-        enc = Encoded(enc.context.detach(), mu, logvar.clamp(-8.0, 4.0), enc.start.detach())
+    the batch. The gradient reaches every weight (encoder, prior, decoder), as in STRIVE."""
     eps = torch.randn_like(enc.prior_mu)
-    z = enc.prior_mu + eps * (0.5 * enc.prior_logvar).exp()
-    if trains == "prior":
-        held = [p for name, p in model.named_parameters() if not name.startswith("prior.") and p.requires_grad]
-        for p in held:
-            p.requires_grad_(False)
-        try:
-            traj = model.decode(batch, enc, z)
-        finally:
-            for p in held:
-                p.requires_grad_(True)
-    else:
-        traj = model.decode(batch, enc, z)
+    traj = model.decode(batch, enc, enc.prior_mu + eps * (0.5 * enc.prior_logvar).exp())
     agents = batch.agent_mask
     count = agents.float().sum().clamp(min=1.0)
     n = agents.shape[1]
@@ -247,7 +252,7 @@ def realism_loss(model: TrafficModel, batch: Batch, enc, collision_weight: float
 
 
 def training_loss(model: TrafficModel, batch: Batch, kl_weight: float, free_bits: float = 0.0,
-                  collision_weight: float = 0.0, off_road_weight: float = 0.0, realism_trains: str = "model"
+                  collision_weight: float = 0.0, off_road_weight: float = 0.0
                   ) -> tuple[torch.Tensor, dict]:
     """The loss of the module docstring and its parts; the realism term only when one of its
     weights is set (so that without it nothing more is drawn from torch's generator)."""
@@ -262,7 +267,7 @@ def training_loss(model: TrafficModel, batch: Batch, kl_weight: float, free_bits
     penalised = (torch.relu(kl_agent - free_bits) * agents).sum() / agents.sum().clamp(min=1.0)
     loss, parts = recon + kl_weight * penalised, {"recon": float(recon.detach()), "kl": float(kl.detach())}
     if collision_weight > 0 or off_road_weight > 0:
-        realism, more = realism_loss(model, batch, enc, collision_weight, off_road_weight, realism_trains)
+        realism, more = realism_loss(model, batch, enc, collision_weight, off_road_weight)
         loss, parts = loss + realism, {**parts, **more}
     return loss, parts
 
@@ -322,6 +327,8 @@ def evaluate_model(model: TrafficModel, items: list[SceneTensors], samples: int 
     ade, fde, min_ade = [], [], []
     coll = {"prior": 0, "posterior": 0, "logged": 0}
     off = {"prior": [0, 0], "posterior": [0, 0], "logged": [0, 0]}
+    coll_known = {"prior": 0, "posterior": 0}
+    off_known = {"prior": 0, "posterior": 0}
     for start in range(0, len(items), batch_size):
         chunk = items[start:start + batch_size]
         batch = collate(chunk)
@@ -344,12 +351,19 @@ def evaluate_model(model: TrafficModel, items: list[SceneTensors], samples: int 
                                    for p in prior])                    # [K, N, F]
             min_ade.extend(((sample_err * valid).sum(-1) / valid.sum(-1).clip(min=1)).min(0)[has])
             every = np.ones_like(valid)
+            coll_before = dict(coll)
             for name, traj, mask in (("prior", prior[0][i, :n], every), ("posterior", recon[i, :n], every),
                                      ("logged", _logged_traj(item), valid)):
                 coll[name] += scene_collides(traj, item.sizes, mask)
                 agents = off_road_agents(item, traj, mask)
                 off[name][0] += int(agents.sum())
                 off[name][1] += n
+                if name != "logged" and not valid.all():     # else the same as over every step
+                    coll_known[name] += scene_collides(traj, item.sizes, valid)
+                    off_known[name] += int(off_road_agents(item, traj, valid).sum())
+                elif name != "logged":
+                    coll_known[name] += coll[name] - coll_before[name]
+                    off_known[name] += int(agents.sum())
     scenes = len(items)
     return {
         "scenes": scenes, "agents": off["logged"][1],
@@ -357,6 +371,13 @@ def evaluate_model(model: TrafficModel, items: list[SceneTensors], samples: int 
         f"prior_min_ade_{samples}_m": float(np.mean(min_ade)),
         "collision_rate": {k: v / scenes for k, v in coll.items()},
         "off_road_rate": {k: v[0] / max(v[1], 1) for k, v in off.items()},
+        # The same two measures of the model's trajectories at the logged steps only (each agent
+        # while it is in the log): like for like with the logged column where agents leave
+        # before the horizon (recorded traffic, highway-env's exits).
+        "collision_rate_logged_steps": {**{k: v / scenes for k, v in coll_known.items()},
+                                        "logged": coll["logged"] / scenes},
+        "off_road_rate_logged_steps": {**{k: v / max(off["logged"][1], 1) for k, v in off_known.items()},
+                                       "logged": off["logged"][0] / max(off["logged"][1], 1)},
     }
 
 
@@ -429,8 +450,7 @@ def train_traffic(data: list[Path], out: Path, config: TrainTrafficConfig = Trai
         losses = []
         for batch in _batches(train, config.batch_size, rng):
             loss, parts = training_loss(model, batch, config.kl_weight, config.free_bits,
-                                        config.prior_collision_weight, config.prior_off_road_weight,
-                                        config.prior_realism_trains)
+                                        config.prior_collision_weight, config.prior_off_road_weight)
             optimiser.zero_grad()
             loss.backward()
             torch.nn.utils.clip_grad_norm_(model.parameters(), 5.0)
