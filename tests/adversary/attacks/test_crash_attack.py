@@ -6,8 +6,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
-from adversary.report.frames import load_artifact, recorded_indices
 import torch
 
 from adversary.attacks.crash import SELECTORS
@@ -16,6 +14,7 @@ from adversary.campaign.job import run_job
 from adversary.campaign.run import RunOptions, run_campaign
 from adversary.campaign.store import ResultStore
 from adversary.report.check import report_problems
+from adversary.report.frames import load_artifact, recorded_indices
 from adversary.report.page import make_report
 from rasterize.errors import InputError
 

@@ -1,8 +1,8 @@
 """The report's opening paragraph from hand-made by-family rows: who fails where and how often,
 and when the intervals are too wide to rank the planners."""
 
-from riskmap.infra.stats import wilson
 from adversary.report.summary import summary_paragraph
+from riskmap.infra.stats import wilson
 
 CATEGORIES = {"natural": "baseline", "aggressive_neighbour": "rule"}
 
