@@ -57,8 +57,7 @@ def main() -> None:
             kind = "success" if collided else "failed"
             path = out / f"{run.parent.name}_{run.name}_{r['name']}_{kind}.png"
             save_attack_panel(record, tracks, rows, r["adversary_row"], result, metrics, path,
-                              f"{record.scene.env_id} seed {record.scene.scene_seed} episode "
-                              f"{record.scene.episode} | {spec} | {r['selector']}")
+                              f"{record.scene.where} | {spec} | {r['selector']}")
             print(path)
 
 

@@ -25,7 +25,7 @@ import torch
 
 from adversary.crash.batch import collate
 from adversary.crash.features import SceneTensors, _to_frame, scene_tensors
-from adversary.crash.generate import GenerationConfig, generate, logged_ego_future
+from adversary.crash.generate import TIME_WEIGHTINGS, GenerationConfig, generate, logged_ego_future
 from adversary.crash.selection import (
     SELECTORS,
     candidates,
@@ -52,6 +52,11 @@ class AttackConfig:
             raise InputError(f"selector {self.selector!r} is unknown; use one of {', '.join(SELECTORS)}")
         if self.replan_every < 1:
             raise InputError(f"replan_every (k) must be >= 1, got {self.replan_every}")
+        if not (self.lr > 0 and self.lr < float("inf")):
+            raise InputError(f"--lr {self.lr}: must be a positive number")
+        if self.time_weighting not in TIME_WEIGHTINGS:
+            raise InputError(f"--time-weighting {self.time_weighting!r} is unknown; use one of "
+                             f"{', '.join(TIME_WEIGHTINGS)}")
 
     def generation(self, closed_loop: bool) -> GenerationConfig:
         return GenerationConfig(iterations=self.iterations_closed_loop if closed_loop else self.iterations_replay,

@@ -8,7 +8,13 @@ import json
 from pathlib import Path
 
 from adversary.crash.config import TrainSelectorConfig, TrainTrafficConfig
-from riskmap.infra.cli import add_config_options, config_from_args, non_negative_int, positive_int
+from riskmap.infra.cli import (
+    add_config_options,
+    config_from_args,
+    non_negative_int,
+    positive_float,
+    positive_int,
+)
 
 
 def _run_train_traffic(args: argparse.Namespace) -> int:
@@ -107,7 +113,8 @@ def _run_attack(args: argparse.Namespace) -> int:
     config = AttackConfig(selector=args.selector, replan_every=args.replan_every,
                           iterations_replay=args.iterations or 300,
                           iterations_closed_loop=args.iterations or 200,
-                          stop_on_collision=not args.full_iterations)
+                          stop_on_collision=not args.full_iterations, lr=args.lr,
+                          time_weighting=args.time_weighting)
     needs_selector = args.selector in ("crash", "crash-no-mam")
     traffic, selectors = default_models(Path(args.scenes), args.traffic_model, args.selector_model)
     summary = run_attacks(args.planner, Path(args.scenes), args.count, config, args.seed, Path(args.out),
@@ -121,6 +128,7 @@ def _run_attack(args: argparse.Namespace) -> int:
 
 def add_attack_parsers(subparsers) -> None:
     from adversary.crash.config import SELECTOR_OBJECTIVES
+    from adversary.crash.generate import TIME_WEIGHTINGS
     from adversary.crash.selection import SELECTORS
 
     p = subparsers.add_parser("train-selector", help="train CRASH's adversarial-agent selection module")
@@ -183,6 +191,10 @@ def add_attack_parsers(subparsers) -> None:
     p.add_argument("--iterations", type=non_negative_int, default=0,
                    help="0: 300 for replay, 200 for a closed-loop planner")
     p.add_argument("--full-iterations", action="store_true", help="do not stop at the first collision")
+    p.add_argument("--lr", type=positive_float, default=0.05, help="Adam's step on the latents")
+    p.add_argument("--time-weighting", choices=TIME_WEIGHTINGS, default="sum",
+                   help="sum: CRASH's adversarial loss over every future step; softmin: weighted "
+                        "towards the step of closest approach")
     p.add_argument("--panels", type=non_negative_int, default=0, help="write PNG panels of the first N scenes")
     p.add_argument("--resume", action="store_true")
     p.add_argument("--quiet", action="store_true")

@@ -33,6 +33,7 @@ from adversary.crash.traffic_model import Encoded, TrafficModel, log_normal
 from rasterize.frames import box_corners
 
 DISTANCE_EPS_M = 1e-6
+TIME_WEIGHTINGS = ("sum", "softmin")
 
 
 @dataclass(frozen=True)
