@@ -194,7 +194,10 @@ def attack_records(records: list, models: Models, planner, planner_spec: str, co
                 "candidates": int((p[i] > 0).sum()), "p": [round(float(v), 5) for v in p[i, :n]]}
         adversary = int(gen.adversary[i])
         if adversary < 0:
+            # MAM drops the vehicles that stood still, DS those behind the ego
             out.append({**base, "status": "no_candidate", "collision": False,
+                        "why": f"{n - 1} other vehicles in the window, none a candidate of the "
+                               f"{config.selector} selector",
                         "seconds": shared_s + timing[i]["rollout_s"], "timing": timing[i]})
             continue
         tracks, final = drive(i, gen.traj[i].numpy(), keep_scene=keep_scenes)

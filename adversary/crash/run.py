@@ -41,7 +41,7 @@ def record_scenes(env_id: str, seed: int, count: int, out: Path, first_episode: 
                   static_agents: int = 0) -> dict:
     """`static_agents`: parked / stopped vehicles added to every episode
     (`riskmap.sim.static_agents`), kept in each scene and in the index."""
-    from adversary.crash.scenes import AttackScene, record_attack_scene, save_record
+    from adversary.crash.scenes import AttackScene, record_attack_scene
 
     out = Path(out)
     index_path = out / INDEX
@@ -72,13 +72,20 @@ def record_scenes(env_id: str, seed: int, count: int, out: Path, first_episode: 
         except InputError as error:
             index["skipped"].append({"episode": episode, "why": str(error)})
         else:
-            save_record(record, out / f"{name}.npz")
-            index["scenes"].append(name)
-            if progress and len(index["scenes"]) % 10 == 0:
-                print(f"{len(index['scenes'])}/{count} scenes (episode {episode})", flush=True)
+            _add_scene(index, out, name, record, count, progress, f"episode {episode}")
         index["next_episode"] = episode + 1
         write_json(index_path, index)
     return index
+
+
+def _add_scene(index: dict, out: Path, name: str, record, count: int, progress: bool, where: str) -> None:
+    """Write scene `name` and list it in the index (which the caller then commits)."""
+    from adversary.crash.scenes import save_record
+
+    save_record(record, out / f"{name}.npz")
+    index["scenes"].append(name)
+    if progress and len(index["scenes"]) % 10 == 0:
+        print(f"{len(index['scenes'])}/{count} scenes ({where})", flush=True)
 
 
 def record_commonroad_scenes(inputs: list[str | Path], count: int, out: Path, t0_s: float = 2.0,
@@ -90,7 +97,7 @@ def record_commonroad_scenes(inputs: list[str | Path], count: int, out: Path, t0
     sweep share (scene_seed, episode); a vehicle that cannot be attacked is listed in the index's
     "skipped" with why. The index is the commit point, as for `record_scenes`."""
     from adversary.crash.recorded import SMOOTHING_S, candidates, sweep_files, sweep_scenes
-    from adversary.crash.scenes import RECORDED_ENV, AttackScene, save_record
+    from adversary.crash.scenes import RECORDED_ENV, AttackScene
     from riskmap.data.collect_commonroad import scenario_files
 
     out = Path(out)
@@ -114,11 +121,7 @@ def record_commonroad_scenes(inputs: list[str | Path], count: int, out: Path, t0
         if why:
             index["skipped"].append({"file": path.name, "ego_id": ego_id, "why": why})
         else:
-            name = f"scene_{episode:05d}"
-            save_record(record, out / f"{name}.npz")
-            index["scenes"].append(name)
-            if progress and len(index["scenes"]) % 10 == 0:
-                print(f"{len(index['scenes'])}/{count} scenes ({path.name} vehicle {ego_id})", flush=True)
+            _add_scene(index, out, f"scene_{episode:05d}", record, count, progress, f"{path.name} vehicle {ego_id}")
         index["next_candidate"] = episode + 1
         write_json(index_path, index)
         if len(index["scenes"]) >= count:
