@@ -113,7 +113,7 @@ def _run_attack(args: argparse.Namespace) -> int:
     config = AttackConfig(selector=args.selector, replan_every=args.replan_every,
                           iterations_replay=args.iterations or 300,
                           iterations_closed_loop=args.iterations or 200,
-                          stop_on_collision=not args.full_iterations, lr=args.lr,
+                          stop_on_collision=not args.full_iterations, lr=args.lr or AttackConfig.lr,
                           time_weighting=args.time_weighting)
     needs_selector = args.selector in ("crash", "crash-no-mam")
     traffic, selectors = default_models(Path(args.scenes), args.traffic_model, args.selector_model)
@@ -191,7 +191,7 @@ def add_attack_parsers(subparsers) -> None:
     p.add_argument("--iterations", type=non_negative_int, default=0,
                    help="0: 300 for replay, 200 for a closed-loop planner")
     p.add_argument("--full-iterations", action="store_true", help="do not stop at the first collision")
-    p.add_argument("--lr", type=positive_float, default=0.05, help="Adam's step on the latents")
+    p.add_argument("--lr", type=positive_float, default=None, help="Adam's step on the latents (default 0.15)")
     p.add_argument("--time-weighting", choices=TIME_WEIGHTINGS, default="sum",
                    help="sum: CRASH's adversarial loss over every future step; softmin: weighted "
                         "towards the step of closest approach")

@@ -39,7 +39,7 @@ TIME_WEIGHTINGS = ("sum", "softmin")
 @dataclass(frozen=True)
 class GenerationConfig:
     iterations: int = 300             # 300 for a replayed ego, 200 for a closed-loop one (CRASH)
-    lr: float = 0.05                  # Adam on the latents
+    lr: float = 0.15                  # Adam on the latents (AttackConfig.lr)
     replan_every: int = 20            # k: planner re-runs every k iterations (closed loop only)
     position_scale_m: float = 10.0    # L_adv is computed on positions / this
     collision_weight: float = 20.0    # STRIVE's weights for the non-ego penalties
