@@ -5,7 +5,7 @@ import pytest
 
 from adversary.attacks.monitor import collision_type
 from adversary.crash.solution import ego_only_solution
-from adversary.report.stats import bootstrap_mean, wilson
+from riskmap.infra.stats import bootstrap_mean, wilson
 from riskmap.sim.aggressive import softmin_agent_weights
 
 
