@@ -90,7 +90,7 @@ def run_dir(family: str, run: Run) -> Path:
 def attack(family: str, run: Run, count: int, workers: int) -> dict:
     spec = PLANNERS[run.planner]
     spec = spec[family] if isinstance(spec, dict) else spec
-    config = AttackConfig(selector=run.selector, replan_every=PLANNER_K[run.planner], **run.settings)
+    config = AttackConfig(**{"selector": run.selector, "replan_every": PLANNER_K[run.planner], **run.settings})
     selectors = ROOT / (run.selector_model.format(family=family) or f"checkpoints/crash_selector_{family}")
     return run_attacks(spec, ROOT / "data" / "attack" / family, count, config, seed=0, out=run_dir(family, run),
                        traffic=ROOT / "checkpoints" / f"crash_traffic_{family}", selectors=selectors,
