@@ -165,74 +165,97 @@ def generate(model: TrafficModel, batch: Batch, p: torch.Tensor, ego_future: tor
     touched.
     """
     started = time.perf_counter()
-    b = p.shape[0]
     with torch.no_grad():
         enc = model.encode(batch)
         if z_init is None:
             z_init, _ = model.posterior_of(batch, enc)
-    adversary = torch.where(p.sum(-1) > 0, p.argmax(-1), torch.full((b,), -1))
-    z = z_init.clone().requires_grad_(True)
-    optimiser = torch.optim.Adam([z], lr=config.lr)
-    ego_future = ego_future.clone()
-    active = adversary >= 0
-    losses, replans = [], torch.zeros(b, dtype=torch.long)
-    iterations = torch.zeros(b, dtype=torch.long)
-
-    verified: dict[int, torch.Tensor] = {}     # scene -> trajectories whose closed-loop drive collided
-
-    def rerun(scenes: list[int]) -> None:
-        with torch.no_grad():
-            current = _decode_with_ego(model, batch, enc, z, ego_future)
-        futures, hit = replan(current, scenes)
-        ego_future[scenes] = futures.detach()
-        replans[scenes] += 1
-        if config.stop_on_collision:
-            for i, collided in zip(scenes, hit):
-                if collided:
-                    verified[i] = current[i].clone()
-                    active[i] = False
-
-    def collides() -> torch.Tensor:
-        # Discs are cheap but generous: only where they overlap are the boxes' IoUs computed.
-        with torch.no_grad():
-            traj = _decode_with_ego(model, batch, enc, z, ego_future)
-            near = adversary_penetration(traj, batch, adversary) > 0.0
-        return torch.tensor([bool(near[i]) and adversary_iou(traj[i], batch.sizes[i], int(adversary[i]))
-                             > config.stop_iou for i in range(b)])
-
+    search = _Search(model, batch, enc, p, z_init, ego_future, config, replan)
+    optimiser = torch.optim.Adam([search.z], lr=config.lr)
+    losses = []
     for it in range(config.iterations):
         replanned: list[int] = []
-        if replan is not None and it > 0 and it % config.replan_every == 0 and active.any():
-            replanned = active.nonzero().flatten().tolist()
-            rerun(replanned)
+        if replan is not None and it > 0 and it % config.replan_every == 0 and search.active.any():
+            replanned = search.active.nonzero().flatten().tolist()
+            search.rerun(replanned)
         if config.stop_on_collision and it > 0 and it % config.check_every == 0:
-            hit = collides() & active
-            if replan is not None:
-                # A predicted collision counts only against the planner's answer to it.
-                fresh = [i for i in (hit & active).nonzero().flatten().tolist() if i not in replanned]
-                if fresh:
-                    rerun(fresh)
-                    hit = collides()
-            active &= ~hit
-        if not active.any():
+            search.stop_decoded_hits(replanned)
+        if not search.active.any():
             break
-        frozen = z.detach().clone()
-        loss, _, parts = attack_loss(model, batch, enc, z, z_init, p, adversary, ego_future, config)
-        optimiser.zero_grad()
-        loss.sum().backward()
-        z.grad[:, 0] = 0.0          # the ego's latent is never used (its states are fixed)
-        optimiser.step()
-        with torch.no_grad():        # Adam's momentum would move a finished scene: undo it
-            z[~active] = frozen[~active]
-        iterations[active] += 1
+        parts = search.step(optimiser, z_init)
         if it % 10 == 0 or it == config.iterations - 1:
             losses.append({"iteration": it, **parts})
-    with torch.no_grad():
-        traj = _decode_with_ego(model, batch, enc, z, ego_future)
-    for i, kept in verified.items():
-        traj[i] = kept
-    return Generation(traj, z.detach(), p, adversary, losses, replans.tolist(), iterations.tolist(),
-                      time.perf_counter() - started)
+    return Generation(search.final(), search.z.detach(), p, search.adversary, losses, search.replans.tolist(),
+                      search.iterations.tolist(), time.perf_counter() - started)
+
+
+class _Search:
+    """The state of one `generate` call: latents, the ego's rows, which scenes still run, and
+    the trajectories of scenes whose closed-loop drive already collided (`verified`)."""
+
+    def __init__(self, model, batch, enc, p, z_init, ego_future, config, replan):
+        self.model, self.batch, self.enc, self.p, self.config, self.replan = model, batch, enc, p, config, replan
+        b = p.shape[0]
+        self.adversary = torch.where(p.sum(-1) > 0, p.argmax(-1), torch.full((b,), -1))
+        self.z = z_init.clone().requires_grad_(True)
+        self.ego_future = ego_future.clone()
+        self.active = self.adversary >= 0
+        self.replans = torch.zeros(b, dtype=torch.long)
+        self.iterations = torch.zeros(b, dtype=torch.long)
+        self.verified: dict[int, torch.Tensor] = {}
+
+    def decode(self) -> torch.Tensor:
+        with torch.no_grad():
+            return _decode_with_ego(self.model, self.batch, self.enc, self.z, self.ego_future)
+
+    def rerun(self, scenes: list[int]) -> None:
+        """The planner answers the current trajectories; a drive that collided ends its scene."""
+        current = self.decode()
+        futures, hit = self.replan(current, scenes)
+        self.ego_future[scenes] = futures.detach()
+        self.replans[scenes] += 1
+        if self.config.stop_on_collision:
+            for i, collided in zip(scenes, hit):
+                if collided:
+                    self.verified[i] = current[i].clone()
+                    self.active[i] = False
+
+    def collides(self) -> torch.Tensor:
+        """[B] the decoded adversary overlaps the ego's row (discs are cheap but generous: only
+        where they overlap are the boxes' IoUs computed)."""
+        traj = self.decode()
+        near = adversary_penetration(traj, self.batch, self.adversary) > 0.0
+        return torch.tensor([bool(near[i]) and adversary_iou(traj[i], self.batch.sizes[i], int(self.adversary[i]))
+                             > self.config.stop_iou for i in range(traj.shape[0])])
+
+    def stop_decoded_hits(self, replanned: list[int]) -> None:
+        hit = self.collides() & self.active
+        if self.replan is not None:
+            # A predicted collision counts only against the planner's answer to it.
+            fresh = [i for i in hit.nonzero().flatten().tolist() if i not in replanned]
+            if fresh:
+                self.rerun(fresh)
+                hit = self.collides()
+        self.active &= ~hit
+
+    def step(self, optimiser, z_init) -> dict:
+        """One Adam step on the running scenes' latents; the loss parts of scene 0."""
+        frozen = self.z.detach().clone()
+        loss, _, parts = attack_loss(self.model, self.batch, self.enc, self.z, z_init, self.p, self.adversary,
+                                     self.ego_future, self.config)
+        optimiser.zero_grad()
+        loss.sum().backward()
+        self.z.grad[:, 0] = 0.0          # the ego's latent is never used (its states are fixed)
+        optimiser.step()
+        with torch.no_grad():            # Adam's momentum would move a finished scene: undo it
+            self.z[~self.active] = frozen[~self.active]
+        self.iterations[self.active] += 1
+        return parts
+
+    def final(self) -> torch.Tensor:
+        traj = self.decode()
+        for i, kept in self.verified.items():
+            traj[i] = kept
+        return traj
 
 
 def adversary_iou(traj: torch.Tensor, sizes: torch.Tensor, adversary: int) -> float:
