@@ -195,7 +195,7 @@ class _Search:
     def __init__(self, model, batch, enc, p, z_init, ego_future, config, replan):
         self.model, self.batch, self.enc, self.p, self.config, self.replan = model, batch, enc, p, config, replan
         b = p.shape[0]
-        self.adversary = torch.where(p.sum(-1) > 0, p.argmax(-1), torch.full((b,), -1))
+        self.adversary = adversary_of(p)
         self.z = z_init.clone().requires_grad_(True)
         self.ego_future = ego_future.clone()
         self.active = self.adversary >= 0
@@ -256,6 +256,12 @@ class _Search:
         for i, kept in self.verified.items():
             traj[i] = kept
         return traj
+
+
+def adversary_of(p: torch.Tensor) -> torch.Tensor:
+    """[B] the adversary row argmax p of each scene, -1 for a scene without candidates."""
+    p = p.detach()
+    return torch.where(p.sum(-1) > 0, p.argmax(-1), torch.full((p.shape[0],), -1))
 
 
 def adversary_iou(traj: torch.Tensor, sizes: torch.Tensor, adversary: int) -> float:

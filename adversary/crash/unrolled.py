@@ -25,8 +25,8 @@ distance of argmax p is what the generator goes on to optimise. The surrogate is
 the unroll: there its zero value would still add a second-order term (d/dp of its z-gradient)
 that the forward dynamics do not have.
 
-`generation_loss` is the generator's `attack_loss` itself, whose collision penalty uses smoothed
-distances so that every unrolled step can differentiate it twice.
+The loss is the generator's own `attack_loss`, whose collision penalty uses smoothed distances so
+that every unrolled step can differentiate it twice.
 """
 
 from __future__ import annotations
@@ -34,7 +34,14 @@ from __future__ import annotations
 import torch
 
 from adversary.crash.batch import Batch
-from adversary.crash.generate import DISTANCE_EPS_M, GenerationConfig, attack_loss, logged_ego_future
+from adversary.crash.generate import (
+    DISTANCE_EPS_M,
+    GenerationConfig,
+    adversarial_distance,
+    adversary_of,
+    attack_loss,
+    logged_ego_future,
+)
 from adversary.crash.selection import candidates
 from adversary.crash.traffic_model import Encoded, TrafficModel
 
@@ -42,38 +49,22 @@ MAX_STEP = 2.0      # latent units per agent and unrolled step; 5 steps then rea
                     # the generator's 60 Adam iterations of 0.05 per coordinate (latent size 32)
 
 
-def generation_loss(model: TrafficModel, batch: Batch, enc: Encoded, z: torch.Tensor, z_init: torch.Tensor,
-                    p: torch.Tensor, adversary: torch.Tensor, ego_future: torch.Tensor,
-                    config: GenerationConfig) -> tuple[torch.Tensor, torch.Tensor]:
-    """(loss [B], trajectories [B, N, F, 4]): the generator's own `attack_loss` (twice
-    differentiable: its collision term uses smoothed distances)."""
-    loss, traj, _ = attack_loss(model, batch, enc, z, z_init, p, adversary, ego_future, config)
-    return loss, traj
-
-
-def hard_adversary(p: torch.Tensor) -> torch.Tensor:
-    """[B] argmax p per scene, -1 for a scene without candidates (as `generate` picks it)."""
-    b = p.shape[0]
-    return torch.where(p.detach().sum(-1) > 0, p.detach().argmax(-1), torch.full((b,), -1))
-
-
 def straight_through_hard(traj: torch.Tensor, ego_future: torch.Tensor, p: torch.Tensor,
-                          scale_m: float) -> torch.Tensor:
-    """[B] zero-valued term whose gradient in p is each agent's squared distance to the ego (the
-    straight-through part of the hard term; module docstring)."""
-    sq = ((traj[..., :2] - ego_future[:, None, :, :2]) / scale_m).pow(2).sum(-1).sum(-1)     # [B, N]
-    return ((p - p.detach()) * sq).sum(-1)
+                          config: GenerationConfig) -> torch.Tensor:
+    """[B] zero-valued term whose gradient in p is each agent's adversarial distance to the ego
+    (the straight-through part of the hard term; module docstring)."""
+    return ((p - p.detach()) * adversarial_distance(traj, ego_future, config)).sum(-1)
 
 
 def unroll(model: TrafficModel, batch: Batch, enc: Encoded, z_init: torch.Tensor, p: torch.Tensor,
            ego_future: torch.Tensor, steps: int, eta: float, config: GenerationConfig) -> torch.Tensor:
     """z_K [B, N, latent] after `steps` differentiable gradient steps on L(z; p) from z_init."""
-    adversary = hard_adversary(p)
+    adversary = adversary_of(p)
     movable = torch.ones_like(z_init)
     movable[:, 0] = 0.0                              # the ego's latent is never used
     z = z_init.detach().clone().requires_grad_(True)
     for _ in range(steps):
-        loss, _ = generation_loss(model, batch, enc, z, z_init, p, adversary, ego_future, config)
+        loss, _, _ = attack_loss(model, batch, enc, z, z_init, p, adversary, ego_future, config)
         (grad,) = torch.autograd.grad(loss.sum(), z, create_graph=True)
         step = eta * grad * movable
         # A trust region: no agent's latent moves more than MAX_STEP per step (smooth norm, so
@@ -97,6 +88,6 @@ def unrolled_loss(model: TrafficModel, batch: Batch, selector, mam: bool, steps:
     p = selector(enc.context, mask)
     ego = logged_ego_future(batch)
     z = unroll(model, batch, enc, z_init, p, ego, steps, eta, config)
-    loss, traj = generation_loss(model, batch, enc, z, z_init, p, hard_adversary(p), ego, config)
-    loss = loss + straight_through_hard(traj, ego, p, config.position_scale_m)
+    loss, traj, _ = attack_loss(model, batch, enc, z, z_init, p, adversary_of(p), ego, config)
+    loss = loss + straight_through_hard(traj, ego, p, config)
     return torch.where(mask.any(-1), loss, torch.zeros_like(loss)), p

@@ -13,10 +13,17 @@ from adversary.cli import build_parser, main
 from adversary.crash.batch import collate
 from adversary.crash.config import TrainSelectorConfig
 from adversary.crash.features import scene_tensors
-from adversary.crash.generate import GenerationConfig, _discs, collision_penalty, logged_ego_future
+from adversary.crash.generate import (
+    GenerationConfig,
+    _discs,
+    adversary_of,
+    attack_loss,
+    collision_penalty,
+    logged_ego_future,
+)
 from adversary.crash.selection import SelectionModule, candidates
 from adversary.crash.traffic_model import TrafficModel, TrafficModelConfig
-from adversary.crash.unrolled import generation_loss, hard_adversary, unroll, unrolled_loss
+from adversary.crash.unrolled import unroll, unrolled_loss
 from rasterize.errors import InputError
 from rasterize.scene import Scene
 from riskmap.infra.checkpoint import read_sidecar
@@ -96,7 +103,7 @@ def test_gradient_reaches_every_selector_parameter_through_the_unroll(tiny):
     p = selector(enc.context, candidates(batch, mam=False))
     ego = logged_ego_future(batch)
     z = unroll(model, batch, enc, z_init, p, ego, 3, ETA, GenerationConfig()).detach()
-    direct, _ = generation_loss(model, batch, enc, z, z_init, p, hard_adversary(p), ego, GenerationConfig())
+    direct, _, _ = attack_loss(model, batch, enc, z, z_init, p, adversary_of(p), ego, GenerationConfig())
     torch.testing.assert_close(direct, loss.detach(), rtol=1e-5, atol=1e-4)    # same value
     direct.sum().backward()
     differences = [(a - param.grad).abs().max() for a, param in zip(through, selector.parameters())]
@@ -113,8 +120,8 @@ def test_the_ego_latent_never_moves_and_steps_lower_the_loss(tiny):
     z = unroll(model, batch, enc, z_init, p, ego, 4, ETA, GenerationConfig())
     torch.testing.assert_close(z[:, 0], z_init[:, 0])
     config = GenerationConfig()
-    before, _ = generation_loss(model, batch, enc, z_init, z_init, p, hard_adversary(p), ego, config)
-    after, _ = generation_loss(model, batch, enc, z, z_init, p, hard_adversary(p), ego, config)
+    before, _, _ = attack_loss(model, batch, enc, z_init, z_init, p, adversary_of(p), ego, config)
+    after, _, _ = attack_loss(model, batch, enc, z, z_init, p, adversary_of(p), ego, config)
     assert (after < before).all()
 
 
