@@ -18,9 +18,9 @@ import numpy as np
 import torch
 
 from riskmap.guard.events import nearest_neighbours
-from riskmap.guard.guarded import GUARD_CHECKPOINT, GuardConfig, obstacle_ahead
+from riskmap.guard.guarded import GUARD_CHECKPOINT, GuardConfig, obstacle_ahead, system2_config
 from riskmap.guard.predictor import AccidentPredictor
-from riskmap.guard.system2 import DecelerationAgent, System2Config
+from riskmap.guard.system2 import DecelerationAgent
 from riskmap.infra.atomic import write_json
 from riskmap.sim.episode import make_env
 from riskmap.sim.plan import HumanDriver
@@ -63,18 +63,19 @@ def main() -> None:
         env = make_env(env_id, 10)
         for episode in range(args.episodes):
             drive_episode(env, tap, DriveConfig(env_id, args.episodes, seed=200), episode)
-        agent = DecelerationAgent(System2Config())
+        agent = DecelerationAgent(system2_config(config))
         s1, s2 = [], []
         for _ in range(args.repeats):
             for scene in tap.scenes:
                 t0 = time.perf_counter()
                 neighbours = nearest_neighbours(scene, config.neighbours)
-                scores = predictor.score(scene.states, scene.valid, scene.sizes, scene.kinds, scene.ego_index,
-                                         neighbours, scene.current_index, 1)
+                scores, ttcs = predictor.score(scene.states, scene.valid, scene.sizes, scene.kinds,
+                                               scene.ego_index, neighbours, scene.current_index, 1)
                 alert = bool(len(scores) and scores.max() >= predictor.alert_threshold)
+                ttc = float(ttcs[scores.argmax()]) if alert else None
                 ahead = obstacle_ahead(scene, config.obstacle_ahead_m, config.obstacle_lateral_m)
                 t1 = time.perf_counter()
-                agent.decide(alert, float(scene.ego_state()[4]), ahead)
+                agent.decide(alert, float(scene.ego_state()[4]), ahead, ttc)
                 t2 = time.perf_counter()
                 s1.append(1000 * (t1 - t0))
                 s2.append(1000 * (t2 - t1))

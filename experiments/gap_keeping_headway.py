@@ -13,7 +13,6 @@ configurations the checkpoint trained on, so that the evaluation configurations 
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
 
 import numpy as np

@@ -43,9 +43,15 @@ def anyspeed_guard(inner_spec: str, seed: int, checkpoint: str = ""):
     """The TGAT-triggered guard whose plans act at any speed (speed threshold 0 m/s in every
     family instead of 20 m/s highway / 5 m/s intersection): tests whether the threshold, rather
     than System 1, keeps the guard from acting."""
-    from riskmap.guard.guarded import GUARD_CHECKPOINT, GuardConfig, GuardedHumanDriver, GuardedPlanner
+    from riskmap.guard.guarded import (
+        GUARD_CHECKPOINT,
+        GuardConfig,
+        GuardedHumanDriver,
+        GuardedPlanner,
+        system2_config,
+    )
     from riskmap.guard.predictor import AccidentPredictor
-    from riskmap.guard.system2 import DecelerationAgent, System2Config
+    from riskmap.guard.system2 import DecelerationAgent
     from riskmap.registry import make_planner
     from riskmap.sim.plan import drives_itself
 
@@ -53,7 +59,7 @@ def anyspeed_guard(inner_spec: str, seed: int, checkpoint: str = ""):
     config = GuardConfig(trigger="tgat", speed_threshold_mps={family: 0.0 for family in families},
                          default_speed_threshold_mps=0.0)
     predictor = AccidentPredictor.load(checkpoint or GUARD_CHECKPOINT)
-    agent = DecelerationAgent(System2Config(decel_mps2=config.decel_mps2, control_hz=config.decision_hz))
+    agent = DecelerationAgent(system2_config(config))
     inner = make_planner(inner_spec, seed=seed)
     if drives_itself(inner):
         return GuardedHumanDriver(predictor, agent, config)
@@ -106,7 +112,7 @@ def drive_record(record, attack: dict, variant: str, seed: int) -> dict:
     if guard is not None:
         summary = guard.summary()
         out["guard"] = {k: summary[k] for k in ("frames", "interventions", "intervention_ratio", "single",
-                                                "sustained")}
+                                                "sustained", "hard")}
         # when System 2 took over (s of the episode) and the TGAT's highest score then
         out["guard"]["interventions_s"] = [e["time_s"] for e in guard.log]
         out["guard"]["max_scores"] = [e["max_score"] for e in guard.log]

@@ -24,6 +24,7 @@ import numpy as np
 
 from riskmap.guard.aggressors import AggressorHook
 from riskmap.infra.atomic import write_json
+from riskmap.infra.stats import wilson
 from riskmap.registry import make_planner
 from riskmap.sim.episode import make_env
 from riskmap.sim.rollout import DriveConfig, DriveHooks, drive_episode
@@ -35,15 +36,25 @@ VARIANT_PREFIX = {"alone": "", "always": "guard-always:", "tgat": "guard:"}
 EPISODE_S = {"highway-v0": 20.0, "intersection-v0": 16.0}
 
 
-def run_cell(out: Path, env_id: str, scene: str, inner: str, variant: str, episodes: int, seed: int) -> None:
-    """variant: alone, always, tgat, or tgat@X (the TGAT trigger with alert threshold X)."""
-    cell = out / env_id / scene / inner / variant
-    base, _, threshold = variant.partition("@")
-    spec = VARIANT_PREFIX[base] + INNER[inner][env_id]
-    if threshold:
-        from riskmap.guard.guarded import make_guarded
+def _number(text: str) -> float | None:
+    try:
+        return float(text)
+    except ValueError:
+        return None
 
-        planner = make_guarded("tgat", INNER[inner][env_id], seed=seed, alert_threshold=float(threshold))
+
+def run_cell(out: Path, env_id: str, scene: str, inner: str, variant: str, episodes: int, seed: int) -> None:
+    """variant: alone, always, tgat, tgat@X (the TGAT trigger with alert threshold X) or
+    tgat@CKPT (with the guard checkpoint CKPT, a path without suffix, and its own threshold)."""
+    cell = out / env_id / scene / inner / variant.replace("/", "-")
+    base, _, option = variant.partition("@")
+    spec = VARIANT_PREFIX[base] + INNER[inner][env_id]
+    threshold = _number(option) if option else None
+    if option:
+        from riskmap.guard.guarded import GUARD_CHECKPOINT, make_guarded
+
+        planner = make_guarded("tgat", INNER[inner][env_id], seed=seed, alert_threshold=threshold,
+                               checkpoint=GUARD_CHECKPOINT if threshold is not None else option)
     else:
         planner = make_planner(spec, seed=seed)
     env = make_env(env_id, 10)
@@ -55,7 +66,7 @@ def run_cell(out: Path, env_id: str, scene: str, inner: str, variant: str, episo
         hooks = (AggressorHook(),) if scene == "aggressive" else ()
         record = drive_episode(env, planner, config, episode, hooks=DriveHooks(on_ready=hooks))
         guard = getattr(planner, "guard", None)
-        record.update({"spec": spec + (f" (alert threshold {threshold})" if threshold else ""), "scene": scene, "variant": variant, "inner": inner,
+        record.update({"spec": spec + (f" ({option})" if option else ""), "scene": scene, "variant": variant, "inner": inner,
                        "aggressor": bool(hooks and hooks[0].aggressor is not None)})
         if guard is not None:
             record["guard"] = guard.summary()
@@ -75,9 +86,11 @@ def summarise(out: Path) -> list[dict]:
         interventions = sum(r["guard"]["interventions"] for r in records if "guard" in r)
         s1 = [x for r in records if "guard" in r for x in r["guard"]["system1_ms"]]
         s2 = [x for r in records if "guard" in r for x in r["guard"]["system2_ms"]]
+        hard = sum(r["guard"].get("hard", 0) for r in records if "guard" in r)
         rows.append({
             "env": env_id, "scene": scene, "inner": inner, "variant": variant, "episodes": len(records),
             "collisions": int(sum(r["collided"] for r in records)),
+            "collision_ci": wilson(int(sum(r["collided"] for r in records)), len(records)), "hard": hard,
             "collision_rate": float(np.mean([r["collided"] for r in records])),
             "distance_m": float(np.mean([r["distance_m"] for r in records])),
             "mean_speed_mps": float(np.mean([r["mean_speed_mps"] for r in records])),
@@ -90,13 +103,15 @@ def summarise(out: Path) -> list[dict]:
 
 
 def markdown(rows: list[dict]) -> str:
-    lines = [("| env | scene | planner | variant | episodes | collisions | collision rate | distance (m) | "
-             "mean speed (m/s) | frames | interventions | BDI ratio |"), "|" + "---|" * 12]
+    lines = [("| env | scene | planner | variant | episodes | collisions [95% CI] | distance (m) | "
+             "mean speed (m/s) | frames | interventions (hard) | BDI ratio |"), "|" + "---|" * 11]
     for r in rows:
         ratio = f"{r['intervention_ratio']:.3f}" if r["intervention_ratio"] is not None else "–"
+        ci = r["collision_ci"]
         lines.append(f"| {r['env']} | {r['scene']} | {r['inner']} | {r['variant']} | {r['episodes']} | "
-                     f"{r['collisions']} | {r['collision_rate']:.2f} | {r['distance_m']:.0f} | "
-                     f"{r['mean_speed_mps']:.1f} | {r['frames'] or '–'} | {r['interventions'] or 0} | {ratio} |")
+                     f"{r['collisions']} ({100 * ci['value']:.0f}% [{100 * ci['lo']:.0f}–{100 * ci['hi']:.0f}]) | "
+                     f"{r['distance_m']:.0f} | {r['mean_speed_mps']:.1f} | {r['frames'] or '–'} | "
+                     f"{r['interventions'] or 0} ({r['hard']}) | {ratio} |")
     return "\n".join(lines) + "\n"
 
 

@@ -6,13 +6,13 @@ closed loop the attack was judged in; the ego passes through boxes, so the episo
 whole horizon), and `judge.judge` finds the collisions (box IoU > 0.02, from t0 on). A record
 with a collision is cut at the ego's first collision step (with anyone: windows after a
 collision would be labelled as normal driving) and turned into guard windows with
-`riskmap.guard.dataset.extract_windows` (crashed at the cut: positives end 0.1 s ... 1 s before
+`riskmap.guard.dataset.extract_windows` (crashed at the cut: windows of the partner end 0.1 s ... 3 s before
 it, against the neighbour with the smallest d_s there, which must be the adversary when the
 first collision is the adversary's); a record without one gives negatives only, over the whole
 rollout.
 
 Where the cut lies: highway-env ends a natural episode at the first contact of two boxes, so the
-natural positives end 0.1 ... 1 s before the first touch. The judge's collision (IoU > 0.02)
+natural positives end 0.1 ... 3 s before the first touch. The judge's collision (IoU > 0.02)
 comes later, once the boxes are well inside each other (in a slow side-swipe, seconds later);
 windows ending at it would show overlapping boxes, which no natural positive does. By default
 (`cut="contact"`) the recording is therefore cut at the onset of that contact: the first step of
@@ -40,7 +40,8 @@ import numpy as np
 
 from rasterize.errors import InputError
 from rasterize.scene import AgentKind
-from riskmap.guard.dataset import GuardCollectConfig, extract_windows, split_counts
+from riskmap.guard.dataset import GuardCollectConfig, extract_windows, positives_within, split_counts
+from riskmap.guard.features import MAX_HORIZON_S
 from riskmap.infra.atomic import write_json, write_npz
 from riskmap.infra.provenance import provenance
 from riskmap.infra.rundir import lock_out_dir
@@ -53,6 +54,7 @@ CUTS = ("contact", "judge")
 class GuardDataConfig:
     split: str = "adversarial"
     val_fraction: float = 0.0       # share of each run's scenes (the last ones) that go to "val"
+    skip_scenes: int = 0            # the first scenes of every run are left out (kept for evaluation)
     cut: str = "contact"            # where a collision cuts the recording (module docstring)
     # Window settings shared with `riskmap guard collect` (control rate, max d_s, negatives).
     windows: GuardCollectConfig = field(default_factory=GuardCollectConfig)
@@ -64,6 +66,8 @@ class GuardDataConfig:
             raise InputError(f"--cut {self.cut!r} must be one of {', '.join(CUTS)}")
         if not 0.0 <= self.val_fraction < 1.0:
             raise InputError(f"--val-fraction {self.val_fraction} must be in [0, 1)")
+        if self.skip_scenes < 0:
+            raise InputError(f"--skip-scenes {self.skip_scenes} must be ≥ 0")
 
 
 @dataclass(frozen=True)
@@ -175,12 +179,12 @@ def rollout_windows(record, attack: dict, planner, config: GuardCollectConfig, r
     states, valid = result.states[:, :end], result.valid[:, :end]
     kinds = recorder_kinds(record.log.kinds, result.log_ids)
     windows = extract_windows(states, valid, result.sizes, kinds, result.ego, cut is not None, config, rng)
-    partners = sorted({int(i) for i in windows["neighbour"][windows["label"] == 1]})
+    partners = sorted({int(i) for i in windows["neighbour"][np.isfinite(windows["ttc_s"])]})
     meta.update({"collided": cut is not None, "cut_step": cut, "judged_step": judged, "cut_at": cut_at,
                  "first_collision_is_adversary": cut is not None and metrics["collision"]
                  and metrics["collision_time_s"] == metrics["collision_any_time_s"],
                  "positive_partners": partners, "partner_is_adversary": partners == [adversary] if partners else None,
-                 "windows": len(windows["label"]), "positives": int(windows["label"].sum())})
+                 "windows": len(windows["ttc_s"]), "positives": positives_within(windows["ttc_s"], MAX_HORIZON_S)})
     return windows, meta
 
 
@@ -193,7 +197,7 @@ def export(attack_dirs: list[Path], out: Path, config: GuardDataConfig = GuardDa
     from riskmap.registry import cached_planner
 
     runs = [read_attack_run(Path(d)) for d in attack_dirs]
-    todo = [(run, i, name) for run in runs for i, name in enumerate(run.names)]
+    todo = [(run, i, name) for run in runs for i, name in enumerate(run.names) if i >= config.skip_scenes]
     # Every record and the scene of every attack that will be driven again are read before
     # --out exists: a damaged one stops the export with nothing written.
     attacks = {(run.path, name): read_attack(run, name) for run, _, name in todo}
@@ -209,7 +213,7 @@ def export(attack_dirs: list[Path], out: Path, config: GuardDataConfig = GuardDa
         if attack.get("status") != "ok":
             metas.append({"attack": str(run.path / "attacks" / name), "skipped": attack.get("status")})
             continue
-        n_val = round(config.val_fraction * len(run.names))
+        n_val = round(config.val_fraction * (len(run.names) - config.skip_scenes))
         split = "val" if i >= len(run.names) - n_val else config.split
         scene = attack["scene"]
         job = job_name(split, scene["env_id"], run.planner, run.selector, scene["scene_seed"], name)

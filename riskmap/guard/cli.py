@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from riskmap.guard.config import GuardTrainConfig
+from riskmap.guard.config import GuardTrainConfig, TGATConfig
 from riskmap.guard.dataset import GuardCollectConfig
 from riskmap.infra.cli import add_config_options, config_from_args, positive_int
 
@@ -24,12 +24,14 @@ def cmd_collect(args: argparse.Namespace) -> int:
 def cmd_train(args: argparse.Namespace) -> int:
     from riskmap.guard.train import train
 
-    config = config_from_args(GuardTrainConfig, args)
+    config = config_from_args(GuardTrainConfig, args, model=config_from_args(TGATConfig, args))
     result = train(Path(args.data), Path(args.out), config, resume=args.resume, progress=not args.quiet)
     for split in ("seen", "unseen"):
         m = result["test"][split]
         print(f"{split}: n={m['n']} ({m['positives']} positive) AP {m['ap']:.3f} AUC {m['auc']:.3f} "
               f"accuracy {m['accuracy']:.3f} F1 {m['f1']:.3f}")
+    print(f"alert threshold {result['alert_threshold']:.3f} ({result['alert_threshold_source']}); "
+          f"label horizon {result['horizon_s']:g} s")
     print(f"checkpoint {Path(args.out) / 'best.safetensors'}")
     return 0
 
@@ -74,9 +76,16 @@ def add_parsers(sub) -> None:
     q = guard_sub.add_parser("train", help="train the TGAT accident predictor")
     q.add_argument("--data", required=True, help="directory from `riskmap guard collect`")
     q.add_argument("--out", required=True, help="run directory")
-    add_config_options(q, GuardTrainConfig, "epochs", "patience", "lr", "batch_size", "seed",
-                       help={"patience": "epochs without a better val AP"},
+    add_config_options(q, GuardTrainConfig, "epochs", "patience", "lr", "batch_size", "seed", "ttc_weight",
+                       "alert_ratio",
+                       help={"patience": "epochs without a better val AP",
+                             "ttc_weight": "weight of the time-to-contact loss beside the BCE",
+                             "alert_ratio": "share of validation decision frames that alert: sets the "
+                                            "checkpoint's alert threshold"},
                        option_types={name: positive_int for name in ("epochs", "patience", "batch_size")})
+    add_config_options(q, TGATConfig, "horizon_s",
+                       help={"horizon_s": "label horizon: a window is positive when the ego touches the "
+                                          "neighbour within this many seconds of its last event (≤ 3)"})
     q.add_argument("--resume", action="store_true")
     q.add_argument("--quiet", action="store_true")
     q.set_defaults(func=cmd_train)

@@ -5,13 +5,22 @@ risk-map planner), a seed and an episode number, natural or with a scripted aggr
 neighbour (`riskmap.guard.aggressors`). Natural and aggressive runs of the same (seed, episode)
 meet the same traffic: they are paired accident/normal runs.
 
-Labels: a window is positive when the ego collides with that neighbour within HORIZON_S (1 s:
-segments 7–8) after its last observed event. Every crash yields positive windows ending 0.1 s
-to 1 s before it; negatives are the other pairs of the same episodes, every 0.5 s, half the
-nearest by d_s and half at random, at most `negatives_per_episode`.
+Time to contact: every window stores `ttc_s`, the time from its last observed event to the ego's
+contact with that neighbour (inf when they never touch). The label is derived when the data is
+read (`load_split(..., horizon_s)`): positive when ttc_s ≤ horizon_s, so one collection serves
+every label horizon up to MAX_HORIZON_S (3 s). A crash yields a window of its partner ending at
+every control step of the 3 s before it; the other windows are the other pairs (and the partner
+earlier) every 0.5 s, half the nearest by d_s and half at random, at most
+`negatives_per_episode`, none later than 3 s before the end of an episode that did not crash
+(their future is not known that far).
+
+Decision frames: the windows the online guard would score — the 2 nearest neighbours by d_s every
+0.5 s (`frame_*` arrays, `frame` = the frame's index, `frames` = how many frames the episode has).
+Training picks the alert threshold on the validation frames for a target alert ratio.
 
 Splits: train and validation episodes (seed `seed`) and the seen test episodes (seed `seed + 1`,
-independent traffic) come from the seen families; the unseen test comes from the held-out family.
+independent traffic) come from the seen families; the unseen test comes from the held-out family,
+which no training or validation window comes from.
 
 Layout: DIR/jobs/<job>.npz (atomic; `--resume` skips those present), DIR/manifest.json.
 """
@@ -25,8 +34,8 @@ from pathlib import Path
 import numpy as np
 
 from rasterize.errors import InputError
-from riskmap.guard.events import scene_separations
-from riskmap.guard.features import EDGE_DIM, HORIZON_S, NODE_DIM, OBSERVED, SEGMENT_S, window_features
+from riskmap.guard.events import nearest_by_separation, scene_separations
+from riskmap.guard.features import EDGE_DIM, MAX_HORIZON_S, NODE_DIM, OBSERVED, SEGMENT_S, window_features
 from riskmap.infra.atomic import write_json, write_npz
 from riskmap.infra.provenance import provenance
 from riskmap.infra.rundir import claim_out_dir
@@ -37,8 +46,8 @@ PLANNER_CHECKPOINTS = {"highway-v0": "checkpoints/riskmap_highway",
 
 @dataclass(frozen=True)
 class GuardCollectConfig:
-    seen_envs: tuple[str, ...] = ("highway-v0", "merge-v0")
-    unseen_envs: tuple[str, ...] = ("intersection-v0",)
+    seen_envs: tuple[str, ...] = ("highway-v0", "merge-v0", "intersection-v0")
+    unseen_envs: tuple[str, ...] = ("roundabout-v0",)
     train_episodes: int = 40          # per seen family and driver, natural + aggressive each
     seen_test_episodes: int = 12
     unseen_episodes: int = 16
@@ -49,6 +58,7 @@ class GuardCollectConfig:
     control_hz: int = 10
     max_ds_m: float = 50.0            # farther pairs are not interactions
     negatives_per_episode: int = 24
+    frame_neighbours: int = 2         # scored per decision frame, as `GuardConfig.neighbours`
 
     def __post_init__(self) -> None:
         """Bad settings stop here, before `collect` claims --out."""
@@ -115,42 +125,56 @@ def crash_partner(ds_last: np.ndarray) -> int:
     return int(np.argmin(ds_last))
 
 
+def _features(states, valid, sizes, kinds, ego: int, pairs: list[tuple[int, int]], seg: int) -> dict:
+    out = {"node_u": np.zeros((len(pairs), NODE_DIM), np.float32),
+           "node_i": np.zeros((len(pairs), NODE_DIM), np.float32),
+           "edge": np.zeros((len(pairs), OBSERVED, EDGE_DIM), np.float32),
+           "mask": np.zeros((len(pairs), OBSERVED), bool)}
+    for w, (i, k) in enumerate(pairs):
+        out["node_u"][w], out["node_i"][w], out["edge"][w], out["mask"][w] = window_features(
+            states, valid, sizes, kinds, ego, i, k, seg)
+    return out
+
+
 def extract_windows(states, valid, sizes, kinds, ego: int, crashed: bool, config: GuardCollectConfig,
                     rng: np.random.Generator) -> dict[str, np.ndarray]:
-    """Windows of one recorded episode (arrays as `TrafficRecorder.arrays()`, 1/control_hz s)."""
+    """Windows and decision frames of one recorded episode (arrays as `TrafficRecorder.arrays()`,
+    1/control_hz s; a crashed episode ends at its crash step). Keys: node_u, node_i, edge, mask,
+    ttc_s, neighbour, last_step (the windows), frame_* and frame, frames (module docstring)."""
     seg = round(SEGMENT_S * config.control_hz)
-    horizon = round(HORIZON_S * config.control_hz)
+    horizon = round(MAX_HORIZON_S * config.control_hz)
     n_steps = states.shape[1]
     ds = scene_separations(states, valid, sizes, ego)
     crash_step = n_steps - 1 if crashed else None
     partner = crash_partner(ds[:, -1]) if crashed else None
-    positives, negatives = [], []
-    if crashed:
-        for k in range(crash_step - horizon, crash_step):
-            if k >= 0 and valid[partner, k]:
-                positives.append((partner, k))
+    positives = [(partner, k) for k in range(crash_step - horizon, crash_step)
+                 if k >= 0 and valid[partner, k]] if crashed else []
     last_labelled = crash_step - 1 if crashed else n_steps - 1 - horizon
-    for k in range(seg, last_labelled + 1, seg):
-        for i in np.flatnonzero(np.isfinite(ds[:, k]) & (ds[:, k] < config.max_ds_m)):
-            if (int(i), k) not in positives:
-                negatives.append((int(i), k))
+    negatives = [(int(i), k) for k in range(seg, last_labelled + 1, seg)
+                 for i in np.flatnonzero(np.isfinite(ds[:, k]) & (ds[:, k] < config.max_ds_m))
+                 if (int(i), k) not in positives]
     if len(negatives) > config.negatives_per_episode:
         order = np.argsort([ds[i, k] for i, k in negatives], kind="stable")
         half = config.negatives_per_episode // 2
         nearest = list(order[:half])
         rest = rng.choice(order[half:], config.negatives_per_episode - half, replace=False)
         negatives = [negatives[j] for j in sorted(nearest + list(rest))]
-    rows = [(i, k, 1) for i, k in positives] + [(i, k, 0) for i, k in negatives]
-    out = {"node_u": np.zeros((len(rows), NODE_DIM), np.float32),
-           "node_i": np.zeros((len(rows), NODE_DIM), np.float32),
-           "edge": np.zeros((len(rows), OBSERVED, EDGE_DIM), np.float32),
-           "mask": np.zeros((len(rows), OBSERVED), bool),
-           "label": np.array([r[2] for r in rows], np.int8),
-           "neighbour": np.array([r[0] for r in rows], np.int32),
-           "last_step": np.array([r[1] for r in rows], np.int32)}
-    for w, (i, k, _) in enumerate(rows):
-        out["node_u"][w], out["node_i"][w], out["edge"][w], out["mask"][w] = window_features(
-            states, valid, sizes, kinds, ego, i, k, seg)
+    pairs = positives + negatives
+    out = _features(states, valid, sizes, kinds, ego, pairs, seg)
+    out["ttc_s"] = np.array([(crash_step - k) / config.control_hz if i == partner else np.inf
+                             for i, k in pairs], np.float32)
+    out["neighbour"] = np.array([i for i, _ in pairs], np.int32)
+    out["last_step"] = np.array([k for _, k in pairs], np.int32)
+    frame_steps = range(seg, n_steps, seg)
+    frame_pairs, frame_of = [], []
+    for f, k in enumerate(frame_steps):
+        for i in nearest_by_separation(ds[:, k], config.frame_neighbours):
+            frame_pairs.append((i, k))
+            frame_of.append(f)
+    out.update({f"frame_{key}": value for key, value in
+                _features(states, valid, sizes, kinds, ego, frame_pairs, seg).items()})
+    out["frame"] = np.array(frame_of, np.int32)
+    out["frames"] = np.array([len(frame_steps)], np.int32)
     return out
 
 
@@ -178,7 +202,7 @@ def run_job(job: Job, config: GuardCollectConfig, env, planner) -> tuple[dict, d
                               config, rng)
     meta = {**asdict(job), "collided": bool(record["collided"]), "simulated_s": record["simulated_s"],
             "aggressor": bool(hooks[-1].aggressor is not None) if job.aggressive else False,
-            "windows": len(windows["label"]), "positives": int(windows["label"].sum())}
+            "windows": len(windows["ttc_s"]), "positives": positives_within(windows["ttc_s"], MAX_HORIZON_S)}
     return windows, meta
 
 
@@ -225,7 +249,21 @@ def split_counts(metas: list[dict]) -> dict:
     return counts
 
 
-WINDOW_KEYS = ("node_u", "node_i", "edge", "mask", "label")
+WINDOW_KEYS = ("node_u", "node_i", "edge", "mask", "ttc_s")
+FRAME_KEYS = ("frame_node_u", "frame_node_i", "frame_edge", "frame_mask", "frame", "frames")
+
+
+def positives_within(ttc_s: np.ndarray, horizon_s: float) -> int:
+    return int(labels_for(ttc_s, horizon_s).sum())
+
+
+def labels_for(ttc_s: np.ndarray, horizon_s: float) -> np.ndarray:
+    """1 where the ego touches the window's neighbour within `horizon_s` of its last event [W] int8.
+    (The tolerance absorbs float32 rounding of ttc_s = steps / control_hz.)"""
+    if not 0 < horizon_s <= MAX_HORIZON_S:
+        raise InputError(f"label horizon {horizon_s} s: must be in (0, {MAX_HORIZON_S:g}] s, the "
+                         "longest the guard data records")
+    return (np.asarray(ttc_s) <= horizon_s + 1e-4).astype(np.int8)
 
 
 def load_job(path: Path) -> dict[str, np.ndarray]:
@@ -236,17 +274,22 @@ def load_job(path: Path) -> dict[str, np.ndarray]:
     fix = ("delete it (and its .json) and write it again: `riskmap guard collect --resume`, or "
            "`adversary guard-data --resume` for attack windows")
     arrays = read_npz(path, "guard windows", fix)
+    if "label" in arrays and "ttc_s" not in arrays:
+        raise InputError(f"guard windows {path} were written by an older version (a fixed 1 s label, "
+                         "no time to contact); collect the dataset again into a new directory")
     missing = [key for key in WINDOW_KEYS if key not in arrays]
     if missing:
         raise InputError(f"guard windows {path} lack {', '.join(missing)}; {fix}")
-    for key in ("node_u", "node_i", "edge"):
+    if arrays["edge"].shape[-1] != EDGE_DIM:
+        raise InputError(f"guard windows {path} have {arrays['edge'].shape[-1]} edge features, this version "
+                         f"{EDGE_DIM}; collect the dataset again into a new directory")
+    for key in ("node_u", "node_i", "edge") + tuple(k for k in FRAME_KEYS[:3] if k in arrays):
         if not np.isfinite(arrays[key]).all():
             raise InputError(f"guard windows {path} hold NaN/inf in {key}; {fix}")
     return arrays
 
 
-def load_split(data: Path, split: str) -> dict[str, np.ndarray]:
-    """All windows of `split` concatenated (keys as `extract_windows`, plus `job` indices)."""
+def _split_paths(data: Path, split: str) -> list[Path]:
     if not Path(data).is_dir():
         raise InputError(f"--data {data} is not a guard dataset directory; make one with "
                          f"`riskmap guard collect --out {data}`")
@@ -257,8 +300,28 @@ def load_split(data: Path, split: str) -> dict[str, np.ndarray]:
             raise InputError(f"no {split!r} windows under {data}/jobs; use one of the splits there: "
                              f"{', '.join(there)}")
         raise InputError(f"no {split!r} windows under {data}/jobs; run `riskmap guard collect --out {data}`")
-    parts = [load_job(p) for p in paths]
-    merged = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
-    merged["job"] = np.concatenate([np.full(len(p["label"]), j) for j, p in enumerate(parts)])
+    return paths
+
+
+def load_split(data: Path, split: str, horizon_s: float) -> dict[str, np.ndarray]:
+    """All windows of `split` concatenated, labelled for `horizon_s` (keys as `extract_windows`'
+    windows, plus `label` and `job` indices)."""
+    parts = [load_job(p) for p in _split_paths(data, split)]
+    merged = {k: np.concatenate([p[k] for p in parts]) for k in WINDOW_KEYS}
+    merged["label"] = labels_for(merged["ttc_s"], horizon_s)
+    merged["job"] = np.concatenate([np.full(len(p["ttc_s"]), j) for j, p in enumerate(parts)])
     return merged
 
+
+def load_frames(data: Path, split: str) -> dict[str, np.ndarray] | None:
+    """The decision frames of `split` (keys node_u, node_i, edge, mask of the scored windows,
+    `frame` = a global frame index, `frames` = the number of frames), or None when the split's
+    files hold none (data written without them)."""
+    parts = [load_job(p) for p in _split_paths(data, split)]
+    if not all(k in p for p in parts for k in FRAME_KEYS):
+        return None
+    out = {k[len("frame_"):]: np.concatenate([p[k] for p in parts]) for k in FRAME_KEYS[:4]}
+    offsets = np.cumsum([0] + [int(p["frames"][0]) for p in parts])
+    out["frame"] = np.concatenate([p["frame"] + offsets[j] for j, p in enumerate(parts)])
+    out["frames"] = int(offsets[-1])
+    return out

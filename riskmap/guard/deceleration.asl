@@ -4,13 +4,23 @@
 //   alert            the accident predictor's warning (or always present: the "always on" mode)
 //   speed(V)         the ego's speed, m/s
 //   obstacle_ahead   a vehicle inside the region ahead of the ego
+//   ttc(T)           the predictor's time to contact with the neighbour it alerts on, s
+//                    (absent in the "always on" mode)
 // Parameters (added once): speed_threshold(T) m/s, decel_rate(A) m/s^2, control_hz(F),
-//   stop_speed(S) m/s.
+//   stop_speed(S) m/s, short_ttc(S) s.
 // Mental state: braking(K), the frames of a sustained deceleration still to go.
 // Action: .slow_down(Mode) asks for one control frame of deceleration at A
-//   (Mode is single or sustained, for the intervention log).
+//   (Mode is single or sustained, for the intervention log); .slow_down(hard) one frame at the
+//   harder rate the orchestrator holds for it.
 //
 // The first applicable plan wins, so the order below is the priority.
+
+// Contact is close (a warning whose time to contact is short): brake hard this frame, at any
+// speed the ego still moves at. The speed threshold gates only the milder plans below: a slow
+// ego about to be hit still gains from stopping sooner. A sustained deceleration in progress
+// resumes on the next frame.
++!control : alert & ttc(C) & short_ttc(S) & C < S & speed(V) & stop_speed(Z) & V > Z
+    <- .slow_down(hard).
 
 // A sustained deceleration ends early once the ego has (nearly) stopped.
 +!control : braking(K) & speed(V) & stop_speed(S) & V < S

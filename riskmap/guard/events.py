@@ -46,10 +46,15 @@ def scene_separations(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, 
     return np.where(present, ds, np.inf)
 
 
+def nearest_by_separation(ds: np.ndarray, count: int) -> list[int]:
+    """Indices of the `count` smallest finite d_s [N] (fewer if absent)."""
+    order = np.argsort(ds, kind="stable")
+    return [int(i) for i in order[:count] if np.isfinite(ds[i])]
+
+
 def nearest_neighbours(scene: Scene, count: int = 2) -> list[int]:
     """Indices of the `count` agents with the smallest d_s to the ego now (fewer if absent)."""
     now = scene.current_index
     ds = scene_separations(scene.states[:, now:now + 1], scene.valid[:, now:now + 1], scene.sizes,
                            scene.ego_index)[:, 0]
-    order = np.argsort(ds, kind="stable")
-    return [int(i) for i in order[:count] if np.isfinite(ds[i])]
+    return nearest_by_separation(ds, count)

@@ -1,9 +1,12 @@
 """Features of one (ego, neighbour) interaction window, shared by the dataset and the online guard.
 
-A window is 8 time segments of `segment` record steps: segments 1–6 are observed interaction
-events, segment 7 is not observed, and segment 8 is the virtual target whose edge feature is zero
-(the model asks "do these two collide by then?"). Node features are taken at the last observed
-segment and held for the whole window, as in the TGAT formulation.
+A window is 6 observed interaction events, one per time segment of `segment` record steps (0.5 s),
+and a virtual target event `horizon_s` after the last observed one whose edge feature is zero (the
+model asks "do these two touch by then?"; the guard paper's window is horizon 1 s: segment 7
+unobserved, segment 8 the target). Node features are taken at the last observed segment and held
+for the whole window, as in the TGAT formulation. An edge carries the projected separation d_s and
+the neighbour's position and velocity relative to the ego, in the ego's frame at that event: d_s
+alone cannot tell a car closing in from one drifting away.
 
 Shapes (one window): node [NODE_DIM], edge [OBSERVED, EDGE_DIM], mask [OBSERVED] (True where
 the event exists: both vehicles present at that time).
@@ -17,14 +20,13 @@ from rasterize.scene import AgentKind
 from riskmap.guard.events import projected_separation
 
 OBSERVED = 6          # observed segments
-TARGET_SEGMENT = 8    # index (1-based) of the virtual target segment
 SEGMENT_S = 0.5       # seconds per segment
 NODE_DIM = 6          # length, width (m), speed (m/s), cos, sin of heading relative to the ego, is-vehicle
-EDGE_DIM = 1          # d_s (m)
-# Event times of segments 1..6 and of the target, seconds from the start of the window.
+EDGE_DIM = 5          # d_s (m); neighbour − ego position x, y (m) and velocity x, y (m/s), ego frame
+# Event times of segments 1..6, seconds from the start of the window.
 EVENT_TIMES_S = SEGMENT_S * np.arange(1, OBSERVED + 1, dtype=np.float64)
-TARGET_TIME_S = SEGMENT_S * TARGET_SEGMENT
-HORIZON_S = TARGET_TIME_S - EVENT_TIMES_S[-1]   # a collision within this after the last event is positive
+HORIZONS_S = (1.0, 2.0, 3.0)    # label horizons the data supports: contact within this after the last event
+MAX_HORIZON_S = max(HORIZONS_S)
 
 
 def _yaw(states: np.ndarray) -> np.ndarray:
@@ -37,6 +39,22 @@ def node_features(states: np.ndarray, sizes: np.ndarray, kinds: np.ndarray, agen
     rel = _yaw(states[agent, step]) - _yaw(states[ego, step])
     return np.array([sizes[agent, 0], sizes[agent, 1], states[agent, step, 4], np.cos(rel), np.sin(rel),
                      float(kinds[agent] == AgentKind.VEHICLE)], dtype=np.float32)
+
+
+def target_time_s(horizon_s: float) -> float:
+    """The virtual target event's time, seconds from the start of the window."""
+    return float(EVENT_TIMES_S[-1]) + horizon_s
+
+
+def relative_motion(su: np.ndarray, si: np.ndarray) -> np.ndarray:
+    """[..., 4]: the neighbour's position and velocity minus the ego's, rotated into the ego's
+    frame (x along its heading); states [..., 6] as `rasterize.scene`."""
+    heading = su[..., 2:4] / np.maximum(np.linalg.norm(su[..., 2:4], axis=-1, keepdims=True), 1e-9)
+    left = np.stack([-heading[..., 1], heading[..., 0]], axis=-1)
+    dp = si[..., :2] - su[..., :2]
+    dv = si[..., 2:4] * si[..., 4:5] - su[..., 2:4] * su[..., 4:5]
+    return np.stack([(dp * heading).sum(-1), (dp * left).sum(-1), (dv * heading).sum(-1), (dv * left).sum(-1)],
+                    axis=-1)
 
 
 def window_features(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, kinds: np.ndarray,
@@ -53,6 +71,7 @@ def window_features(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, ki
     mask = inside & valid[ego, safe] & valid[neighbour, safe]
     su, si = states[ego, safe], states[neighbour, safe]
     ds = projected_separation(su[:, :2], _yaw(su), sizes[ego], si[:, :2], _yaw(si), sizes[neighbour])
-    edge = np.where(mask, ds, 0.0).astype(np.float32)[:, None]
+    edge = np.concatenate([ds[:, None], relative_motion(su, si)], axis=1)
+    edge = np.where(mask[:, None], edge, 0.0).astype(np.float32)
     return (node_features(states, sizes, kinds, ego, ego, last_step),
             node_features(states, sizes, kinds, neighbour, ego, last_step), edge, mask)

@@ -2,15 +2,19 @@
 
 Every decision step (2 Hz, the segment rate of the accident predictor):
   System 1  scores the two neighbours with the smallest d_s to the ego; the highest score against
-            the alert threshold (0.6) sets the `alert` belief (trigger "tgat"), or `alert` is
-            simply always present (trigger "always": the deceleration plan on at high speed);
-  System 2  the AgentSpeak deceleration plans decide, from alert, speed(V) and obstacle_ahead,
-            whether this frame is a slowdown ("single"), part of a sustained deceleration
-            ("sustained") or left to the planner (None).
-A slowdown frame lasts one decision step (0.5 s) and asks for a deceleration of `decel_mps2`:
-in the closed-loop harness the ego's acceleration is capped at −decel_mps2 for that frame; the
-returned plan is also re-timed to that deceleration along the planner's own path, so that a
-harness which only tracks plans sees the same intent. Every intervention is logged.
+            the checkpoint's alert threshold (chosen on validation for a target alert ratio)
+            sets the `alert` belief and the predicted time to contact of that neighbour the
+            `ttc(T)` belief (trigger "tgat"), or `alert` is simply always present (trigger
+            "always": the deceleration plan on at high speed, no time to contact);
+  System 2  the AgentSpeak deceleration plans decide, from alert, ttc(T), speed(V) and
+            obstacle_ahead, whether this frame is a hard brake ("hard": contact is close), a
+            slowdown ("single"), part of a sustained deceleration ("sustained") or left to the
+            planner (None).
+A slowdown frame lasts one decision step (0.5 s) and asks for a deceleration of `decel_mps2`
+(`hard_decel_mps2` for a hard brake): in the closed-loop harness the ego's acceleration is capped
+at minus that for the frame; the returned plan is also re-timed to that deceleration along the
+planner's own path, so that a harness which only tracks plans sees the same intent. Every
+intervention is logged.
 
 Around the IDM/MOBIL ego (SPEC `guard:idm`) there is no plan to wrap: `GuardedHumanDriver`
 replaces the ego by an IDM vehicle with the same parameters whose acceleration is capped the same
@@ -45,6 +49,8 @@ class GuardConfig:
     obstacle_ahead_m: float = 30.0      # x_l: obstacle_ahead if a vehicle is this close ahead …
     obstacle_lateral_m: float = 2.5     # … and at most y_l to either side of the ego's axis (m)
     decel_mps2: float = 3.0             # a
+    hard_decel_mps2: float = 6.0        # the hard brake's deceleration (short time to contact)
+    short_ttc_s: float = 1.5            # a warning with a predicted time to contact below this is urgent
     decision_hz: int = 2                # f
     # "High speed" per scenario family (m/s): above the family's usual cruising speed band.
     speed_threshold_mps: dict = field(default_factory=lambda: {
@@ -95,6 +101,7 @@ class Guard:
         self.frames = 0
         self.timings_s: list[tuple[float, float]] = []   # (System 1, System 2) per step
         self.brake_until_s = -np.inf
+        self.brake_mps2 = self.config.decel_mps2
 
     def attach(self, run) -> None:
         """A new closed-loop episode: keep its recording (for the 6-segment history) and set the
@@ -113,30 +120,33 @@ class Guard:
                          dt_s=SEGMENT_S, radius_m=80.0, lanes=False)
 
     def step(self, scene: Scene) -> str | None:
-        """One decision: returns None, "single" or "sustained" (and logs interventions)."""
+        """One decision: returns None, "single", "sustained" or "hard" (and logs interventions)."""
         cfg = self.config
         t0 = time.perf_counter()
-        max_score, scores = None, []
+        max_score, ttc_s = None, None
         if cfg.trigger == "tgat":
             neighbours = nearest_neighbours(scene, cfg.neighbours)
-            scores = self.predictor.score(scene.states, scene.valid, scene.sizes, scene.kinds,
-                                          scene.ego_index, neighbours, scene.current_index, 1)
+            scores, ttcs = self.predictor.score(scene.states, scene.valid, scene.sizes, scene.kinds,
+                                                scene.ego_index, neighbours, scene.current_index, 1)
             max_score = float(scores.max()) if len(scores) else 0.0
             alert = max_score >= self.predictor.alert_threshold
+            ttc_s = float(ttcs[np.argmax(scores)]) if alert else None
         else:
             alert = True
         speed = float(scene.ego_state()[4])
         ahead = obstacle_ahead(scene, cfg.obstacle_ahead_m, cfg.obstacle_lateral_m)
         t1 = time.perf_counter()
-        decision = self.agent.decide(alert, speed, ahead)
+        decision = self.agent.decide(alert, speed, ahead, ttc_s)
         t2 = time.perf_counter()
         self.timings_s.append((t1 - t0, t2 - t1))
         self.frames += 1
         if decision is not None:
             now = self.run.time_s if self.run is not None else scene.time_s
             self.brake_until_s = now + 1.0 / cfg.decision_hz - 1e-9
+            self.brake_mps2 = cfg.hard_decel_mps2 if decision == "hard" else cfg.decel_mps2
             self.log.append({"time_s": round(float(now), 3), "mode": decision, "alert": bool(alert),
-                             "max_score": max_score, "speed_mps": speed, "obstacle_ahead": ahead})
+                             "max_score": max_score, "ttc_s": ttc_s, "speed_mps": speed,
+                             "obstacle_ahead": ahead})
             LOG.info("guard intervention: %s", self.log[-1])
         return decision
 
@@ -149,13 +159,15 @@ class Guard:
                 "intervention_ratio": len(self.log) / self.frames if self.frames else 0.0,
                 "single": sum(e["mode"] == "single" for e in self.log),
                 "sustained": sum(e["mode"] == "sustained" for e in self.log),
+                "hard": sum(e["mode"] == "hard" for e in self.log),
                 "system1_ms": (1000 * t[:, 0]).tolist(), "system2_ms": (1000 * t[:, 1]).tolist()}
 
 
 def _family_of(run) -> str:
     from riskmap.sim.episode import FAMILY_SETUPS
 
-    return next((name for name, setup in FAMILY_SETUPS.items() if setup is run.setup), "")
+    # A recorded world (CommonRoad) has no highway-env family setup: the default threshold applies.
+    return next((name for name, setup in FAMILY_SETUPS.items() if setup is getattr(run, "setup", None)), "")
 
 
 class GuardedPlanner:
@@ -174,11 +186,11 @@ class GuardedPlanner:
     def attach(self, run) -> None:
         """Closed-loop hook: cap the ego's acceleration during slowdown frames."""
         self.guard.attach(run)
-        vehicle, guard, decel = run.ego, self.guard, self.guard.config.decel_mps2
+        vehicle, guard = run.ego, self.guard
         command = vehicle.command
 
         def guarded_command(accel: float, steer_ccw: float) -> None:
-            command(min(accel, -decel) if guard.braking_now() else accel, steer_ccw)
+            command(min(accel, -guard.brake_mps2) if guard.braking_now() else accel, steer_ccw)
 
         vehicle.command = guarded_command   # this vehicle object only, for this episode
 
@@ -189,7 +201,7 @@ class GuardedPlanner:
         plan.timings_s["guard"] = time.perf_counter() - t0
         if decision is not None:
             plan.waypoints = decelerated_waypoints(plan.waypoints, float(scene.ego_state()[4]),
-                                                   self.guard.config.decel_mps2)
+                                                   self.guard.brake_mps2)
         return plan
 
 
@@ -208,7 +220,7 @@ def guarded_idm_class():
             self._acts += 1
             super().act()
             if self.guard.braking_now():
-                self.action["acceleration"] = min(self.action["acceleration"], -self.guard.config.decel_mps2)
+                self.action["acceleration"] = min(self.action["acceleration"], -self.guard.brake_mps2)
 
     return GuardedIDMVehicle
 
@@ -232,11 +244,19 @@ class GuardedHumanDriver(HumanDriver):
         run.replace_ego(new)
 
 
+def system2_config(config: GuardConfig):
+    """System 2's parameters from the guard's (one source for a, f and the short time to contact)."""
+    from riskmap.guard.system2 import System2Config
+
+    return System2Config(decel_mps2=config.decel_mps2, control_hz=config.decision_hz,
+                         short_ttc_s=config.short_ttc_s)
+
+
 def make_guarded(trigger: str, inner_spec: str, seed: int = 0, checkpoint: str = GUARD_CHECKPOINT,
                  alert_threshold: float | None = None):
     """A guarded planner (or guarded IDM ego) around `inner_spec`; `alert_threshold` overrides the
-    checkpoint's (0.6)."""
-    from riskmap.guard.system2 import DecelerationAgent, System2Config
+    checkpoint's (chosen on validation, see its sidecar)."""
+    from riskmap.guard.system2 import DecelerationAgent
     config = GuardConfig(trigger=trigger)
     predictor = None
     if trigger == "tgat":
@@ -245,7 +265,7 @@ def make_guarded(trigger: str, inner_spec: str, seed: int = 0, checkpoint: str =
         predictor = AccidentPredictor.load(checkpoint)
         if alert_threshold is not None:
             predictor.alert_threshold = float(alert_threshold)
-    agent = DecelerationAgent(System2Config(decel_mps2=config.decel_mps2, control_hz=config.decision_hz))
+    agent = DecelerationAgent(system2_config(config))
     inner = make_planner(inner_spec, seed=seed)
     if drives_itself(inner):
         return GuardedHumanDriver(predictor, agent, config)

@@ -24,17 +24,17 @@ class AccidentPredictor:
         side = read_sidecar(Path(path), kind=CHECKPOINT_KIND)   # missing, damaged, other kind
         model = load_weights(TGAT(TGATConfig(**side["model"])), Path(path),
                              "train it again with `riskmap guard train` or use checkpoints/guard_tgat")
-        return cls(model, side.get("alert_threshold", 0.6))
+        return cls(model, side["alert_threshold"])
 
     @torch.no_grad()
     def score(self, states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, kinds: np.ndarray, ego: int,
-              neighbours: list[int], last_step: int, segment_steps: int) -> np.ndarray:
-        """Accident probabilities [len(neighbours)] of the windows ending at `last_step`
-        (arrays as `riskmap.guard.features.window_features`)."""
+              neighbours: list[int], last_step: int, segment_steps: int) -> tuple[np.ndarray, np.ndarray]:
+        """(accident probabilities, times to contact in s), each [len(neighbours)], of the windows
+        ending at `last_step` (arrays as `riskmap.guard.features.window_features`)."""
         if not neighbours:
-            return np.zeros(0)
+            return np.zeros(0), np.zeros(0)
         parts = [window_features(states, valid, sizes, kinds, ego, i, last_step, segment_steps)
                  for i in neighbours]
         tensors = [torch.from_numpy(np.stack([p[k] for p in parts])) for k in range(4)]
-        logits = self.model(tensors[0].float(), tensors[1].float(), tensors[2].float(), tensors[3].bool())
-        return torch.sigmoid(logits).numpy().astype(np.float64)
+        logits, ttc = self.model(tensors[0].float(), tensors[1].float(), tensors[2].float(), tensors[3].bool())
+        return torch.sigmoid(logits).numpy().astype(np.float64), ttc.numpy().astype(np.float64)

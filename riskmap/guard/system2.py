@@ -2,9 +2,9 @@
 
 The plans are AgentSpeak, run by the `py-agentspeak` interpreter (imported lazily: it is an
 optional dependency, GPL-3.0, installed with the `guard` extra). Each control step the
-orchestrator replaces the perceived beliefs `alert`, `speed(V)` and `obstacle_ahead`, posts the
-goal `!control` and runs the agent until it is idle; the registered action `.slow_down(Mode)`
-reports the plan's decision back to Python.
+orchestrator replaces the perceived beliefs `alert`, `speed(V)`, `obstacle_ahead` and `ttc(T)`,
+posts the goal `!control` and runs the agent until it is idle; the registered action
+`.slow_down(Mode)` reports the plan's decision back to Python.
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ class System2Config:
     decel_mps2: float = 3.0            # a: the deceleration asked for by `.slow_down`
     control_hz: float = 2.0            # f: decisions per second (N = v0 / a · f frames)
     stop_speed_mps: float = 0.5        # a sustained deceleration ends below this speed
+    short_ttc_s: float = 1.5           # a warning with a time to contact below this brakes hard
 
 
 def _agentspeak():
@@ -37,7 +38,8 @@ def _agentspeak():
 
 
 class DecelerationAgent:
-    """One BDI agent per driven ego. `decide(...)` → None (no intervention), "single" or "sustained"."""
+    """One BDI agent per driven ego. `decide(...)` → None (no intervention), "single", "sustained"
+    or "hard"."""
 
     def __init__(self, config: System2Config = System2Config(), plans: Path = PLANS_PATH):
         asp = _agentspeak()
@@ -55,7 +57,8 @@ class DecelerationAgent:
         with open(plans) as source:
             self._agent = env.build_agent(source, actions)
         for name, value in (("speed_threshold", config.speed_threshold_mps), ("decel_rate", config.decel_mps2),
-                            ("control_hz", config.control_hz), ("stop_speed", config.stop_speed_mps)):
+                            ("control_hz", config.control_hz), ("stop_speed", config.stop_speed_mps),
+                            ("short_ttc", config.short_ttc_s)):
             self._tell(name, float(value))
         self._percepts: list = []
 
@@ -90,7 +93,9 @@ class DecelerationAgent:
         beliefs = self._agent.beliefs[("braking", 1)]
         return float(next(iter(beliefs)).args[0]) if beliefs else None
 
-    def decide(self, alert: bool, speed_mps: float, obstacle_ahead: bool) -> str | None:
+    def decide(self, alert: bool, speed_mps: float, obstacle_ahead: bool,
+               ttc_s: float | None = None) -> str | None:
+        """One frame: perceive, reason, act. `ttc_s`: the predictor's time to contact (None: unknown)."""
         asp = self._asp
         for literal in self._percepts:
             self._untell(literal)
@@ -99,6 +104,8 @@ class DecelerationAgent:
             self._percepts.append(self._belief("alert"))
         if obstacle_ahead:
             self._percepts.append(self._belief("obstacle_ahead"))
+        if ttc_s is not None:
+            self._percepts.append(self._belief("ttc", float(ttc_s)))
         for literal in self._percepts:
             self._agent.call(asp.Trigger.addition, asp.GoalType.belief, literal, asp.runtime.Intention())
         self._decision = None

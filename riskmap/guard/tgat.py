@@ -1,8 +1,8 @@
 """TGAT accident predictor over one (ego u, neighbour i) interaction window.
 
 The window is a two-node temporal graph: the observed events e_j = (u, i, t_j, r_j), j = 1..6,
-with r_j the edge feature (d_s), and the query time t_8 of the virtual target event (edge
-feature zero). Layer l embeds node x at time τ by temporal multi-head attention:
+with r_j the edge feature (d_s and the relative position and velocity), and the query time t_*
+= t_6 + horizon of the virtual target event (edge feature zero). Layer l embeds node x at time τ by temporal multi-head attention:
 
     query  = W_q [h_x^{l−1}(τ) ‖ 0 ‖ Φ(0)]
     keys   = W_k [h_y^{l−1}(t_j) ‖ r_j ‖ Φ(τ − t_j)]   over the events with t_j < τ (y the partner)
@@ -10,10 +10,12 @@ feature zero). Layer l embeds node x at time τ by temporal multi-head attention
 
 with the time encoding Φ(Δt) = (1/√m)[cos(ω_1Δt) … cos(ω_mΔt), sin(ω_1Δt) … sin(ω_mΔt)], ω
 learned. h^0 is the projected static node feature. Two layers; the link score of (u, i) at
-t_8 is an MLP of [h_u^2(t_8) ‖ h_i^2(t_8)], a logit (σ gives the accident probability).
+t_* is an MLP of [h_u^2(t_*) ‖ h_i^2(t_*)] with two outputs: a logit (σ gives the accident
+probability) and the time to contact (softplus, seconds after the last observed event; trained on
+the positive windows only, it is meaningful where the logit is high).
 
 Shapes: node_u, node_i [B, NODE_DIM]; edge [B, 6, EDGE_DIM]; mask [B, 6] (True = event exists);
-logits [B].
+logits [B], ttc_s [B].
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ import torch
 from torch import nn
 
 from riskmap.guard.config import TGATConfig
-from riskmap.guard.features import EDGE_DIM, EVENT_TIMES_S, NODE_DIM, OBSERVED, TARGET_TIME_S
+from riskmap.guard.features import EDGE_DIM, EVENT_TIMES_S, NODE_DIM, OBSERVED, target_time_s
 
 
 class TimeEncoding(nn.Module):
@@ -83,11 +85,13 @@ class TGAT(nn.Module):
         self.layers = nn.ModuleList(TemporalAttentionLayer(config.hidden, config.time_dim, config.heads,
                                                            config.dropout) for _ in range(config.layers))
         self.score = nn.Sequential(nn.Linear(2 * config.hidden, config.hidden), nn.ReLU(),
-                                   nn.Linear(config.hidden, 1))
+                                   nn.Linear(config.hidden, 2))
         # Query times: the 6 event times then the target time.
-        times = torch.tensor(list(EVENT_TIMES_S) + [TARGET_TIME_S], dtype=torch.float32)
+        times = torch.tensor(list(EVENT_TIMES_S) + [target_time_s(config.horizon_s)], dtype=torch.float32)
         self.register_buffer("query_times", times, persistent=False)
         self.register_buffer("event_times", times[:OBSERVED].clone(), persistent=False)
+        scale = [config.ds_scale_m] + [config.position_scale_m] * 2 + [config.speed_scale_mps] * 2
+        self.register_buffer("edge_scale", torch.tensor(scale[:EDGE_DIM], dtype=torch.float32), persistent=False)
 
     def _normalise(self, node: torch.Tensor) -> torch.Tensor:
         scale = torch.ones(node.shape[-1], device=node.device)
@@ -95,10 +99,11 @@ class TGAT(nn.Module):
         return node / scale
 
     def forward(self, node_u: torch.Tensor, node_i: torch.Tensor, edge: torch.Tensor,
-                mask: torch.Tensor) -> torch.Tensor:
+                mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(logits [B], time to contact [B] in seconds)."""
         b = node_u.shape[0]
         q = self.query_times.numel()
-        edge = torch.clamp(edge / self.config.ds_scale_m, -5.0, 5.0) * mask[..., None]
+        edge = torch.clamp(edge / self.edge_scale, -5.0, 5.0) * mask[..., None]
         dt = self.query_times[:, None] - self.event_times[None, :]                  # [Q, 6]
         earlier = (dt > 0)[None] & mask[:, None, :]                                  # [B, Q, 6]
         phi_keys = self.time(dt.clamp(min=0.0))[None].expand(b, -1, -1, -1)
@@ -110,4 +115,5 @@ class TGAT(nn.Module):
             new_u = layer(h_u, h_i[:, :OBSERVED], edge, phi_zero, phi_keys, earlier)
             new_i = layer(h_i, h_u[:, :OBSERVED], edge, phi_zero, phi_keys, earlier)
             h_u, h_i = new_u, new_i
-        return self.score(torch.cat([h_u[:, -1], h_i[:, -1]], -1))[:, 0]
+        out = self.score(torch.cat([h_u[:, -1], h_i[:, -1]], -1))
+        return out[:, 0], nn.functional.softplus(out[:, 1])
