@@ -23,7 +23,10 @@ Differences to the episode attacks, all visible in the record:
   `collided_with_adversary` the CRASH/STRIVE collision; kinematic value, collision type and the
   solution check exist only for collisions with the adversary;
 - distance_m and min_gap_m span t0 to the collision (the end without one); Safety % is not
-  measured (None).
+  measured (None);
+- a guarded planner's counts (guard_frames, guard_interventions, guard_hard) are those of the
+  final drive, the one judged: `attack_records` drives it last, after every replanning rollout
+  (one scene per job), and the drive resets the guard. A scene that is not attacked has none.
 A scene that cannot be attacked (the human crashed or left the road before t0 + 6 s, no vehicle
 within 60 m of the ego, or no candidate for the selector) gives an "ok" record with
 `attacked: false` and the reason in `not_attacked`: it counts in every denominator as a job
@@ -39,7 +42,16 @@ from pathlib import Path
 import numpy as np
 
 from adversary.attacks.base import AttackEntry
-from adversary.attacks.episode import RecordingPlanner, attack_seed, job_fields, npz_bytes, scene_arrays
+from adversary.attacks.episode import (
+    GUARD_FIELDS,
+    RecordingPlanner,
+    attack_seed,
+    clear_guard,
+    guard_counts,
+    job_fields,
+    npz_bytes,
+    scene_arrays,
+)
 from adversary.attacks.recorded import job_family, scene_record
 from rasterize.errors import InputError
 from riskmap.infra.config_mapping import require
@@ -129,11 +141,13 @@ def _models(traffic: Path, selector: Path | None):
 def _crash_fields(collided: bool, off_road: bool, distance_m: float | None, min_gap_m: float | None,
                   simulated_s: float | None, extra: dict) -> dict:
     """Job record fields in the `EpisodeRecord` layout. The judge measures no speed and no plan
-    times (None), and its episode is no campaign-seeded one (env_seed None)."""
+    times (None), and its episode is no campaign-seeded one (env_seed None); the guard's counts
+    are None unless `extra` holds them."""
     return job_fields(EpisodeRecord(
         planner="", collided=collided, off_road=off_road, simulated_s=simulated_s,   # planner: dropped
         distance_m=distance_m, mean_speed_mps=None, min_gap_m=min_gap_m, plan_calls=None,
-        plan_ms_median=None, plan_ms_mean=None, plan_ms_p90=None, extra={**extra, "env_seed": None}))
+        plan_ms_median=None, plan_ms_mean=None, plan_ms_p90=None,
+        extra={**dict.fromkeys(GUARD_FIELDS), **extra, "env_seed": None}))
 
 
 def _not_attacked(reason: str, extra: dict, timing: dict | None = None) -> dict:
@@ -147,8 +161,9 @@ def _not_attacked(reason: str, extra: dict, timing: dict | None = None) -> dict:
         "attack_extra": extra, "timing": timing or {}})
 
 
-def crash_record(result: dict, scene_s: float) -> dict:
-    """Campaign record fields (adversary.campaign.job._record's) from one `attack_records` result."""
+def crash_record(result: dict, scene_s: float, guard: dict | None = None) -> dict:
+    """Campaign record fields (adversary.campaign.job._record's) from one `attack_records` result;
+    `guard`: the guard's counts of its final drive (`guard_counts`; None: no guard)."""
     extra = {"selector": result["selector"], "p": result["p"], "candidates": result["candidates"],
              "agents": result["agents"]}
     timing = {"attack_seconds": round(result["seconds"], 3)}
@@ -174,7 +189,7 @@ def crash_record(result: dict, scene_s: float) -> dict:
         "adversary_off_road": bool(m["adversary_off_road"]),
         "other_off_road": bool(m["other_off_road"]),
         "encounters": None, "dangerous_encounters": None, "safety_pct": None,
-        "solution_found": m["solution_found"], "attack_extra": extra,
+        "solution_found": m["solution_found"], **(guard or {}), "attack_extra": extra,
         "timing": {**timing, "generation_seconds": result["generation"]["batch_seconds"]}})
 
 
@@ -210,12 +225,15 @@ def crash_job(job) -> tuple[dict, bytes | None]:
     models = _models(traffic, selector)
     # The same seed as the episode attacks': only the random selector draws.
     seed = attack_seed(job)
+    clear_guard(planner)
     with tempfile.TemporaryDirectory() as tmp:
         panel = Path(tmp) / "panel.png"
         [result] = attack_records([record], models, recording or planner, job.planner,
                                   params.attack_config(), [seed], [panel], keep_scenes=True)
         artifact = _artifact(result, panel, recording)
-    return crash_record(result, scene.t0_s + scene.horizon_s), artifact
+    # The final drive was the attack's last rollout (module docstring): the guard holds its counts.
+    guard = guard_counts(recording or planner) if result["status"] == "ok" else None
+    return crash_record(result, scene.t0_s + scene.horizon_s, guard), artifact
 
 
 ENTRY = AttackEntry("crash", CrashAttackParams, "selection",

@@ -4,6 +4,10 @@
 rule); `record_of` turns a driven episode and its `EpisodeMonitor` into the job record's fields,
 `artifact_of` into the npz the report's gallery draws. `job` is a campaign job
 (adversary.campaign.job.Job), read by attribute.
+
+What a guard did (riskmap.guard.guarded: `guard:SPEC`, `guard-always:SPEC`) is read in one place,
+`guard_counts`, by every attack: the record fields `GUARD_FIELDS` hold the decision frames, the
+interventions and the hard brakes of the job's judged drive, or None when no guard drove.
 """
 
 from __future__ import annotations
@@ -17,6 +21,39 @@ from adversary.attacks.monitor import EpisodeMonitor
 from riskmap.registry import cached_planner
 from riskmap.sim.plan import drives_itself
 from riskmap.sim.record import EpisodeRecord
+
+# The guard's counts of one driven episode in a job record (None: no guard drove the ego).
+GUARD_FIELDS = ("guard_frames", "guard_interventions", "guard_hard")
+
+
+def guard_of(planner):
+    """The guard of a guarded planner (`GuardedPlanner`, `GuardedHumanDriver`: its `guard`, a
+    `riskmap.guard.guarded.Guard`), also through a wrapper that forwards attributes
+    (`RecordingPlanner`); None for any other planner. Found by duck type (a `guard` with a
+    `summary()`), so that the attacks do not import the guard and its models."""
+    guard = getattr(planner, "guard", None) if planner is not None else None
+    return guard if callable(getattr(guard, "summary", None)) else None
+
+
+def clear_guard(planner) -> None:
+    """Zero the guard's counts before a job drives: a drive that hands the ego to the guarded
+    planner resets them itself, but one that replaces it (the recordings' IDM for `guard:idm` on
+    a recorded scene) never does, and a cached planner would otherwise report an earlier job's."""
+    guard = guard_of(planner)
+    if guard is not None:
+        guard.reset()
+
+
+def guard_counts(planner) -> dict:
+    """The record fields `GUARD_FIELDS` of the episode `planner` drove last: its guard's decision
+    frames, interventions and hard-brake frames (`Guard.summary()`); all None without a guard."""
+    guard = guard_of(planner)
+    if guard is None:
+        return dict.fromkeys(GUARD_FIELDS)
+    summary = guard.summary()
+    return {"guard_frames": int(summary.get("frames", 0)),
+            "guard_interventions": int(summary.get("interventions", 0)),
+            "guard_hard": int(summary.get("hard", 0))}
 
 
 def attack_seed(job) -> int:
@@ -120,8 +157,9 @@ def job_fields(record: EpisodeRecord) -> dict:
     return fields
 
 
-def record_of(episode: dict, monitor: EpisodeMonitor, extra: dict) -> dict:
-    """The job's measurements from one driven episode (`drive_episode`'s record) and its monitor."""
+def record_of(episode: dict, monitor: EpisodeMonitor, extra: dict, planner=None) -> dict:
+    """The job's measurements from one driven episode (`drive_episode`'s record) and its monitor;
+    `planner`: what drove it, read right after the drive for its guard's counts (`guard_counts`)."""
     from adversary.crash.solution import ego_only_solution
 
     solution = None
@@ -134,6 +172,7 @@ def record_of(episode: dict, monitor: EpisodeMonitor, extra: dict) -> dict:
         **monitor.summary(),
         "solution_found": solution,
         "env_seed": episode["env_seed"],
+        **guard_counts(planner),
         # Optional, attack-specific numbers (e.g. a search's generations and Pareto front).
         "attack_extra": extra,
     }))
@@ -151,9 +190,11 @@ def drive_with_hooks(job, factory) -> tuple[dict, bytes]:
     planner = cached_planner(job.planner, job.planner_seed)
     env = cached_env(job.env_id, job.budget.control_hz)
     recording = None if drives_itself(planner) else RecordingPlanner(planner)
+    clear_guard(planner)
     attack = factory(job.attack_params, attack_seed(job))
     monitor = EpisodeMonitor(attack, job.safety, job.budget.control_hz)
     episode = drive_episode(env, recording or planner, config,
                             job.episode, hooks=DriveHooks(on_reset=monitor.start, on_step=monitor.step))
     extra = attack.extra() if hasattr(attack, "extra") else {}
-    return record_of(episode, monitor, extra), artifact_of(monitor, recording, job.env_id)
+    return (record_of(episode, monitor, extra, recording or planner),
+            artifact_of(monitor, recording, job.env_id))

@@ -23,7 +23,8 @@ over the vehicles within `safety.radius_m` at 2 Hz up to the contact. The record
 on through a contact (as for the crash attack's rollouts), so distance, speed and gap span the
 whole horizon; the collision fields are the first contact's. The other vehicles follow their
 record, which is never counted off the road (the CRASH judge's rule), so `other_off_road` is
-False.
+False. A guarded planner's counts (guard_frames, ...) are its guard's in the drive; `guard:idm`
+does not drive a recording (the recordings' IDM/MOBIL does), so its guard counts 0 frames.
 """
 
 from __future__ import annotations
@@ -225,10 +226,12 @@ def _encounters(result, contact_step: int | None, safety, every: int) -> tuple[i
     return dangerous, total
 
 
-def natural_record(result, scene: RecordedScene, safety, driver: str | None = None) -> dict:
+def natural_record(result, scene: RecordedScene, safety, driver: str | None = None,
+                   guard: dict | None = None) -> dict:
     """The job record fields of a natural drive on a recorded scene (module docstring); `driver`:
-    the name of what drove the ego (default: the drive's own)."""
-    from adversary.attacks.episode import job_fields
+    the name of what drove the ego (default: the drive's own); `guard`: the guard's counts
+    (adversary.attacks.episode.guard_counts; default: no guard)."""
+    from adversary.attacks.episode import GUARD_FIELDS, job_fields
     from adversary.crash.recorded import recording_traffic
     from adversary.crash.solution import ego_only_solution
     from riskmap.sim.metrics import coarse_collision_type, safety_pct
@@ -255,13 +258,14 @@ def natural_record(result, scene: RecordedScene, safety, driver: str | None = No
         "safety_pct": safety_pct(dangerous, encounters),
         "solution_found": None if solution is None else bool(solution),
         "env_seed": None,
+        **(guard or dict.fromkeys(GUARD_FIELDS)),
         "attack_extra": {"contact": contact, "driver": driver or drive.extra.get("driver")},
     }))
 
 
 def natural_recorded_job(job) -> tuple[dict, bytes]:
     """(record fields, artifact) of a `natural` job on a recorded scene (module docstring)."""
-    from adversary.attacks.episode import RecordingPlanner, npz_bytes, scene_arrays
+    from adversary.attacks.episode import RecordingPlanner, clear_guard, guard_counts, npz_bytes, scene_arrays
     from adversary.crash.judge import rollout
     from riskmap.registry import cached_planner
     from riskmap.sim.plan import drives_itself
@@ -270,8 +274,10 @@ def natural_recorded_job(job) -> tuple[dict, bytes]:
     planner = cached_planner(job.planner, job.planner_seed)
     recording = None if drives_itself(planner) else RecordingPlanner(planner)
     empty = np.zeros((0, record.scene.future_steps, 6))
+    # `guard:idm` does not drive a recording (the recordings' IDM does): its guard then counts 0 frames.
+    clear_guard(planner)
     result = rollout(record, empty, [], recording or planner, job.planner, keep_scene=True)
     artifact = npz_bytes(scene_arrays(result.final_scene, None, recording))
     # The drive names the planner it was handed; with the recording wrapper, name the planner.
     driver = None if recording is None else type(planner).__name__
-    return natural_record(result, job.scene, job.safety, driver), artifact
+    return natural_record(result, job.scene, job.safety, driver, guard_counts(recording or planner)), artifact

@@ -13,7 +13,8 @@ episode) only seed the search (`search_seed`): every episode of a family is one 
 search, and every planner starts from the same initial population. The job's record is the replayed episode of the most critical vector
 (adversary.search.run.most_critical), so for this attack "collision rate" is the share of searches
 that found a failure; `attack_extra` holds the per-generation collisions, the Pareto front and
-the best parameters (SearchOutcome.extra).
+the best parameters (SearchOutcome.extra). A guarded planner's counts (guard_frames, ...) are the
+replay's.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from adversary.attacks.base import AttackEntry
-from adversary.attacks.episode import RecordingPlanner, artifact_of, record_of
+from adversary.attacks.episode import RecordingPlanner, artifact_of, clear_guard, record_of
 from adversary.attacks.monitor import EpisodeMonitor
 from adversary.search.scenarios import ENV_ID, TEMPLATES
 from riskmap.infra.config_mapping import require
@@ -96,15 +97,17 @@ def search_and_replay(job) -> tuple[dict, bytes]:
     outcome = search_in_process(config)
     template = get_template(config.template)
     monitor = EpisodeMonitor(ReplayedScenario(), job.safety, config.evaluation.control_hz)
-    recordings = []
+    recordings, driven = [], []
 
     def wrap(planner):
+        clear_guard(planner)          # the search's evaluations drove it before the replay
         recordings.append(None if drives_itself(planner) else RecordingPlanner(planner))
-        return recordings[0] or planner
+        driven.append(recordings[0] or planner)
+        return driven[0]
 
     episode, _ = run_scenario(template, np.asarray(outcome.best_x), config.evaluation,
                               on_reset=monitor.start, on_step=monitor.step, wrap_planner=wrap)
-    record = record_of(episode, monitor, outcome.extra(template))
+    record = record_of(episode, monitor, outcome.extra(template), driven[0])
     return record, artifact_of(monitor, recordings[0], SEARCH_ENV_ID)
 
 

@@ -13,6 +13,9 @@ Rates carry Wilson intervals, means percentile-bootstrap intervals (riskmap.infr
     Safety %                 mean (and 90th percentile) over jobs of the per-episode Safety %
                              (jobs that do not measure it, e.g. the crash attack's, are left out)
     distance (m)             mean distance driven
+    guard                    for a guarded planner (guard:SPEC): decision frames, interventions and
+                             hard brakes summed over the jobs whose record holds them, and the
+                             intervention ratio interventions / frames (None: no such job)
 
 The CRASH ablation (attacks of category "selection") has one row per (attack label, planner), as
 CRASH's Table III: its collision rate is collisions with the adversary over every finished job,
@@ -27,6 +30,7 @@ from collections import Counter, defaultdict
 
 import numpy as np
 
+from adversary.attacks.episode import GUARD_FIELDS
 from adversary.attacks.recorded import job_family
 from riskmap.infra.stats import bootstrap_mean, wilson
 from riskmap.sim.metrics import CAMPAIGN_COLLISION_TYPES
@@ -50,7 +54,19 @@ def _group_metrics(records: list[dict]) -> dict:
         "solution_rate": wilson(sum(bool(r["solution_found"]) for r in solved), len(solved)),
         "safety_pct": bootstrap_mean([r["safety_pct"] for r in ok]),
         "distance_m": bootstrap_mean([r["distance_m"] for r in ok]),
+        "guard": _guard_metrics(ok),
     }
+
+
+def _guard_metrics(ok: list[dict]) -> dict | None:
+    """What the guard did over finished jobs (module docstring); records written before the
+    guard's counts were kept, and unguarded planners' (None), are left out."""
+    counted = [r for r in ok if all(r.get(k) is not None for k in GUARD_FIELDS)]
+    if not counted:
+        return None
+    frames, interventions, hard = (sum(int(r[k]) for r in counted) for k in GUARD_FIELDS)
+    return {"jobs": len(counted), "frames": frames, "interventions": interventions, "hard": hard,
+            "intervention_ratio": interventions / frames if frames else None}
 
 
 def _ablation_metrics(records: list[dict]) -> dict:
@@ -113,19 +129,43 @@ def _collision_types(records: list[dict]) -> list[dict]:
              "total": sum(counts[p, a].values())} for p, a in sorted(counts)]
 
 
+GUARD_PAIR_METRICS = ("collision_rate", "safety_pct", "distance_m")
+
+
 def _guard_pairs(rows: list[dict]) -> list[dict]:
-    """Rows of `guard:SPEC` (or `guarded:SPEC`) next to the same attack on SPEC, when both ran."""
+    """Rows of `guard:SPEC` (or `guarded:SPEC`) next to the same attack on SPEC, when both ran:
+    the metrics off and on, what the guard did (the guarded row's "guard", `_guard_metrics`),
+    `identical` (every metric off equals on, intervals included) and, when identical, `note`:
+    the sentence that says whether the guard acted at all."""
     by_key = {(r["planner"], r["attack"]): r for r in rows}
     pairs = []
-    metrics = ("collision_rate", "safety_pct", "distance_m")
     for (planner, attack), guarded in sorted(by_key.items()):
         prefix, _, inner = planner.partition(":")
         if prefix in ("guard", "guarded") and (inner, attack) in by_key:
             base = by_key[inner, attack]
-            pairs.append({"planner": inner, "attack": attack,
-                          "off": {k: base[k] for k in metrics},
-                          "on": {k: guarded[k] for k in metrics}})
+            off = {k: base[k] for k in GUARD_PAIR_METRICS}
+            on = {k: guarded[k] for k in GUARD_PAIR_METRICS}
+            pair = {"planner": inner, "attack": attack, "off": off, "on": on,
+                    "guard": guarded["guard"], "identical": off == on}
+            pair["note"] = _guard_note(pair) if pair["identical"] else None
+            pairs.append(pair)
     return pairs
+
+
+def _guard_note(pair: dict) -> str:
+    """The sentence under the guard table for a pair whose metrics are identical off and on."""
+    where = f"{pair['planner']}, {pair['attack']}: guard on and off give identical results"
+    guard = pair["guard"]
+    if guard is None:
+        return f"{where}; the records hold no guard counts (written before they were kept)."
+    if guard["interventions"] == 0:
+        if guard["frames"] == 0:
+            return f"{where}; the guard never intervened (it made no decision: 0 frames)."
+        return f"{where}; the guard never intervened (0 of {guard['frames']} frames)."
+    times = "time" if guard["interventions"] == 1 else "times"
+    brakes = "hard brake" if guard["hard"] == 1 else "hard brakes"
+    return (f"{where}; the guard intervened {guard['interventions']} {times} without changing the "
+            f"outcome ({guard['interventions']} of {guard['frames']} frames, {guard['hard']} {brakes}).")
 
 
 def _search_history(records: list[dict]) -> list[dict]:

@@ -11,8 +11,8 @@ from adversary.report.page import make_report
 from riskmap.infra.config_mapping import to_plain
 
 
-def _record(job_id, planner, attack, category, collided, extra=None):
-    return {"job_id": job_id, "planner": planner, "env_id": "highway-v0", "scene_seed": 0,
+def _record(job_id, planner, attack, category, collided, extra=None, guard=None):
+    return {**dict(zip(("guard_frames", "guard_interventions", "guard_hard"), guard or (None,) * 3)),"job_id": job_id, "planner": planner, "env_id": "highway-v0", "scene_seed": 0,
             "episode": 0, "attack": attack, "attack_name": attack, "attack_category": category,
             "attack_params": {}, "status": "ok", "error": None, "collided": collided,
             "off_road": False, "has_adversary": category != "baseline",
@@ -40,8 +40,12 @@ def test_selection_search_and_guard_sections_render(tmp_path):
             for attack, category in (("natural", "baseline"), ("test_selection", "selection"),
                                      ("test_search", "search")):
                 collided = category != "baseline" and (planner == "cv" or episode == 0)
+                # the guard: idle on the natural episodes, 4 of 16 frames (1 hard) on the search's
+                guard = None if planner == "cv" else (
+                    (8, 0, 0) if category == "baseline" else (8, 3 - 2 * episode, 1 - episode))
                 records.append(_record(f"{planner}-{attack}-{episode}".replace(":", "-"), planner, attack,
-                                       category, collided, search_extra if category == "search" else None))
+                                       category, collided, search_extra if category == "search" else None,
+                                       guard))
     (tmp_path / "c").mkdir()
     (tmp_path / "c" / "campaign.json").write_text(json.dumps(
         {"config": to_plain(config), "jobs": [r["job_id"] for r in records]}))
@@ -59,9 +63,25 @@ def test_selection_search_and_guard_sections_render(tmp_path):
     guard = {row["attack"]: row for row in results["guard"]}
     assert guard["test_search"]["off"]["collision_rate"]["k"] == 2
     assert guard["test_search"]["on"]["collision_rate"]["k"] == 1
+    assert guard["test_search"]["guard"] == {"jobs": 2, "frames": 16, "interventions": 4, "hard": 1,
+                                             "intervention_ratio": 0.25}
+    assert guard["test_search"]["identical"] is False and guard["test_search"]["note"] is None
+    assert guard["natural"]["identical"] is True
+    assert "the guard never intervened (0 of 16 frames)" in guard["natural"]["note"]
+    unguarded = {(r["planner"], r["attack"]): r["guard"] for r in results["comparison"]}
+    assert unguarded["cv", "natural"] is None and unguarded["guarded:cv", "natural"]["frames"] == 16
     assert report["images"]["search"] == "figures/search.png"
     page = tmp_path / "c" / "report.html"
     assert "Not run in this campaign" not in page.read_text()
     ids = {t["id"]: t["rows"] for t in page_summary(page)["tables"]}
     assert ids["crash-ablation"] == 2 and ids["search"] == 2 and ids["guard"] == 3
+    text = page.read_text()
+    assert "<th>interventions / frames (on)</th><th>hard brakes (on)</th>" in text
+    assert "<td>4 / 16 (25.0%)</td>" in text and "<td>0 / 16 (0.0%)</td>" in text
+    notes = text.split('<ul id="guard-notes" class="note">')[1].split("</ul>")[0]
+    assert notes.count("<li>") == 1 and "cv, natural: guard on and off give identical results" in notes
+    job_pages = tmp_path / "c" / "jobs"
+    assert "The guard intervened in 3 of its 8 decision frames (1 hard brake)." in (
+        job_pages / "guarded-cv-test_search-0.html").read_text()
+    assert 'id="guard"' not in (job_pages / "cv-test_search-0.html").read_text()
     assert report_problems(page) == []
