@@ -23,7 +23,7 @@ def frame_max_scores(window_scores: np.ndarray, frame: np.ndarray, frames: int) 
 def threshold_for_ratio(frame_scores: np.ndarray, ratio: float) -> float:
     """The smallest threshold t with mean(frame_scores ≥ t) ≤ ratio (ties stay below it)."""
     scores = np.sort(np.asarray(frame_scores, dtype=np.float64))[::-1]
-    k = int(np.floor(ratio * len(scores)))
+    k = int(np.floor(ratio * len(scores) + 1e-9))   # ratio·n exact in reals may round just below
     if k >= len(scores):
         return 0.0
     return float(np.nextafter(scores[k], np.inf))

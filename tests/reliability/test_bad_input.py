@@ -299,11 +299,29 @@ class Fixtures:
                       "node_i": rng.normal(size=(n, NODE_DIM)).astype(np.float32),
                       "edge": rng.normal(size=(n, OBSERVED, EDGE_DIM)).astype(np.float32),
                       "mask": np.ones((n, OBSERVED), bool),
-                      "label": (np.arange(n) % 2).astype(np.int8),
-                      "neighbour": np.ones(n, np.int32), "last_step": np.arange(n, dtype=np.int32)}
+                      "ttc_s": np.where(np.arange(n) % 2 == 1, 0.5, np.inf).astype(np.float32),
+                      "neighbour": np.ones(n, np.int32), "last_step": np.arange(n, dtype=np.int32),
+                      "frame_node_u": rng.normal(size=(n, NODE_DIM)).astype(np.float32),
+                      "frame_node_i": rng.normal(size=(n, NODE_DIM)).astype(np.float32),
+                      "frame_edge": rng.normal(size=(n, OBSERVED, EDGE_DIM)).astype(np.float32),
+                      "frame_mask": np.ones((n, OBSERVED), bool),
+                      "frame": (np.arange(n) // 2).astype(np.int32), "frames": np.array([n // 2], np.int32)}
             np.savez_compressed(jobs / f"{split}_highway-v0_idm_s0_e0000_nat.npz", **arrays)
         first = jobs / "train_highway-v0_idm_s0_e0000_nat.npz"
-        if variant == "half_job":
+
+        def edit(change):
+            with np.load(first) as data:
+                arrays = {k: data[k] for k in data.files}
+            change(arrays)
+            np.savez_compressed(first, **arrays)
+
+        if variant == "old_format":          # an older version's file: a fixed label, no time to contact
+            edit(lambda a: a.update(label=(a.pop("ttc_s") < 1).astype(np.int8), edge=a["edge"][..., :1]))
+        elif variant == "narrow_edges":      # d_s only: an edge dimension this version does not read
+            edit(lambda a: a.update(edge=np.ascontiguousarray(a["edge"][..., :1])))
+        elif variant == "nan_frame":
+            edit(lambda a: a["frame_edge"].__setitem__((0, 0, 0), np.nan))
+        elif variant == "half_job":
             _truncate(first)
         elif variant == "empty_job":
             first.write_bytes(b"")
@@ -910,6 +928,14 @@ add(
     gtrain_row("job-empty", lambda fx, t: fx.guard_data("empty_job"), S("train_highway-v0_idm")),
     gtrain_row("job-nan", lambda fx, t: fx.guard_data("nan_job"), S("train_highway-v0_idm")),
     gtrain_row("job-wrong-keys", lambda fx, t: fx.guard_data("wrong_keys"), S("train_highway-v0_idm")),
+    gtrain_row("job-old-format", lambda fx, t: fx.guard_data("old_format"), S("train_highway-v0_idm")),
+    gtrain_row("job-narrow-edges", lambda fx, t: fx.guard_data("narrow_edges"), S("train_highway-v0_idm")),
+    gtrain_row("job-nan-frame", lambda fx, t: fx.guard_data("nan_frame"), S("train_highway-v0_idm")),
+    gtrain_row("horizon-s-zero", lambda fx, t: fx.guard_data(), S("--horizon-s"), "--horizon-s", "0"),
+    gtrain_row("horizon-s-beyond-data", lambda fx, t: fx.guard_data(), S("--horizon-s"), "--horizon-s", "4"),
+    gtrain_row("alert-ratio-one", lambda fx, t: fx.guard_data(), S("--alert-ratio"), "--alert-ratio", "1"),
+    gtrain_row("ttc-weight-negative", lambda fx, t: fx.guard_data(), S("--ttc-weight"), "--ttc-weight", "-1"),
+    gtrain_row("ttc-weight-nan", lambda fx, t: fx.guard_data(), S("--ttc-weight"), "--ttc-weight", "nan"),
     gtrain_row("epochs-zero", lambda fx, t: fx.guard_data(), S("--epochs"), "--epochs", "0", usage=True),
     gtrain_row("lr-negative", lambda fx, t: fx.guard_data(), S("--lr"), "--lr", "-0.01"),
     gtrain_row("out-under-file", lambda fx, t: fx.guard_data(), UNDER_FILE_NAMES, out_arg=under_file,
@@ -937,6 +963,8 @@ add(
     geval_row("job-nan", ck(GUARD_SRC), lambda fx, t: fx.guard_data("nan_job"), S("train_highway-v0_idm"),
               "--splits", "train"),
     geval_row("split-unknown", ck(GUARD_SRC), GD, S("nosuch"), "--splits", "seen,nosuch"),
+    geval_row("job-old-format", ck(GUARD_SRC), lambda fx, t: fx.guard_data("old_format"),
+              S("train_highway-v0_idm"), "--splits", "train"),
     geval_row("job-truncated", ck(GUARD_SRC), lambda fx, t: fx.guard_data("half_job"),
               S("train_highway-v0_idm"), "--splits", "train"),
     geval_row("out-under-file", ck(GUARD_SRC), GD, UNDER_FILE_NAMES, out_arg=under_file, out=under_file),
@@ -1158,6 +1186,7 @@ add(
     gdata_row("val-fraction-nan", AR(), S("--val-fraction"), "--val-fraction", "nan"),
     gdata_row("split-path", AR(), S("--split"), "--split", "../x"),
     gdata_row("cut-unknown", AR(), S("--cut"), "--cut", "later", usage=True),
+    gdata_row("skip-scenes-negative", AR(), S("--skip-scenes"), "--skip-scenes", "-1"),
     gdata_row("out-under-file", AR(), UNDER_FILE_NAMES, out_arg=under_file, out=under_file),
     gdata_row("out-readonly", AR(), S(readonly_out), out_arg=readonly_out, out=readonly_out, root_skip=True),
     gdata_row("out-proc", AR(), PROC_NAMES, out_arg=PROC_OUT, out=lambda fx, t: Path(PROC_OUT)),

@@ -163,20 +163,26 @@ def test_guard_collect(guard_collect_reference, point, tmp_path):
 
 
 def _guard_windows(path: Path, n: int, seed: int) -> None:
-    """Made-up guard windows (the layout of `riskmap guard collect`) whose label is whether the
-    separation closes to overlap: learnable, so that validation AP moves between epochs."""
+    """Made-up guard windows (the layout of `riskmap guard collect`) whose time to contact is short
+    when the separation closes to overlap: learnable, so that validation AP moves between epochs;
+    with decision frames, so that the alert threshold is chosen on them (and written again on
+    resume)."""
     from riskmap.guard.features import EDGE_DIM, NODE_DIM, OBSERVED
     from riskmap.infra.atomic import write_npz
 
     rng = np.random.default_rng(seed)
-    label = (np.arange(n) % 3 == 0).astype(np.int8)
+    label = np.arange(n) % 3 == 0
     start = rng.uniform(15, 30, n)
-    end = np.where(label == 1, rng.uniform(-1, 2, n), rng.uniform(10, 30, n))
+    end = np.where(label, rng.uniform(-1, 2, n), rng.uniform(10, 30, n))
     edge = np.repeat(np.linspace(start, end, OBSERVED).T[..., None], EDGE_DIM, axis=2)
     node = rng.normal(size=(n, NODE_DIM)).astype(np.float32)
+    ttc = np.where(label, rng.uniform(0.1, 2.0, n), np.inf).astype(np.float32)
     write_npz(path, {"node_u": node, "node_i": node.copy(), "edge": edge.astype(np.float32),
-                     "mask": np.ones((n, OBSERVED), bool), "label": label,
-                     "neighbour": np.ones(n, np.int32), "last_step": np.arange(n, dtype=np.int32)})
+                     "mask": np.ones((n, OBSERVED), bool), "ttc_s": ttc,
+                     "neighbour": np.ones(n, np.int32), "last_step": np.arange(n, dtype=np.int32),
+                     "frame_node_u": node, "frame_node_i": node.copy(), "frame_edge": edge.astype(np.float32),
+                     "frame_mask": np.ones((n, OBSERVED), bool), "frame": (np.arange(n) // 2).astype(np.int32),
+                     "frames": np.array([(n + 1) // 2], np.int32)})
 
 
 @pytest.fixture(scope="module")
@@ -194,6 +200,15 @@ def guard_train_reference(tmp_path_factory):
 @pytest.mark.parametrize("point", kill_point_params())
 def test_guard_train(guard_train_reference, point, tmp_path):
     guard_train_reference.check_kill_and_resume(point, tmp_path / "out")
+
+
+def test_guard_train_reference_chooses_its_threshold_on_the_frames(guard_train_reference):
+    """The runs compared above go through the validation-frame threshold, not the fixed one."""
+    import json
+
+    sidecar = json.loads((guard_train_reference.out / "best.json").read_text())
+    assert "validation" in sidecar["alert_threshold_source"]
+    assert sidecar["validation_alert_ratio"] <= 0.05
 
 
 def _after_last(reference: Reference, name: str) -> str:

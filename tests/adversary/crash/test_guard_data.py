@@ -11,8 +11,8 @@ from adversary.crash.judge import box_iou, braking_track, judge, rollout
 from adversary.crash.scenes import AttackScene, record_attack_scene, save_record
 from rasterize.errors import InputError
 from rasterize.scene import AgentKind
-from riskmap.guard.dataset import load_split
-from riskmap.guard.features import HORIZON_S
+from riskmap.guard.dataset import labels_for, load_frames, load_split
+from riskmap.guard.features import MAX_HORIZON_S
 from riskmap.infra.atomic import write_json
 from riskmap.registry import cached_planner
 
@@ -74,23 +74,37 @@ def test_positive_windows_end_before_the_collision_and_name_the_adversary(attack
     assert cut <= judged and all(box_iou(s[ego, k], sz[ego], s[adversary, k], sz[adversary]) > 0
                                  for k in range(cut, judged + 1))
     assert box_iou(s[ego, cut - 1], sz[ego], s[adversary, cut - 1], sz[adversary]) == 0.0
-    positive = windows["label"] == 1
-    # One positive window per 10 Hz step over the label horizon before the collision, none at it.
+    assert "label" not in windows
+    positive = labels_for(windows["ttc_s"], MAX_HORIZON_S) == 1
+    # One positive window per 10 Hz step over the longest label horizon (3 s) before the
+    # collision, none at it; each knows its time to contact: the steps to the cut.
     np.testing.assert_array_equal(np.sort(windows["last_step"][positive]),
-                                  np.arange(cut - round(HORIZON_S / result.dt_s), cut))
+                                  np.arange(cut - round(MAX_HORIZON_S / result.dt_s), cut))
     assert (windows["neighbour"][positive] == adversary).all()
+    np.testing.assert_allclose(windows["ttc_s"][positive],
+                               (cut - windows["last_step"][positive]) * result.dt_s, atol=1e-5)
     assert windows["last_step"].max() < cut           # nothing after the cut
-    assert (windows["label"] == 0).sum() > 0
+    assert (~positive).sum() > 0
+    assert (np.isinf(windows["ttc_s"]) | (windows["ttc_s"] > MAX_HORIZON_S) | positive).all()
+    # decision frames every 0.5 s up to the cut
+    assert windows["frames"].tolist() == [len(range(5, cut + 1, 5))]
 
     calm_name = job_name("adversarial", "highway-v0", "replay", "manual", 0, "scene_00001")
     calm = dict(np.load(tmp_path / "jobs" / f"{calm_name}.npz"))
     calm_meta = json.loads((tmp_path / "jobs" / f"{calm_name}.json").read_text())
-    assert calm["label"].sum() == 0 and not calm_meta["collided"] and calm_meta["cut_step"] is None
-    # Not cut: negatives reach to the last step whose label horizon lies inside the rollout.
-    assert calm["last_step"].max() > cut
+    assert np.isinf(calm["ttc_s"]).all() and not calm_meta["collided"] and calm_meta["cut_step"] is None
+    assert calm_meta["positives"] == 0 and meta["positives"] == positive.sum()
+    # Not cut (the rollout runs the whole horizon): negatives every 0.5 s up to the last step
+    # whose 3 s future lies inside the rollout.
+    last_known = result.states.shape[1] - 1 - round(MAX_HORIZON_S / result.dt_s)
+    assert calm["last_step"].max() == 5 * (last_known // 5)
 
-    merged = load_split(tmp_path, "adversarial")
-    assert len(merged["label"]) == len(windows["label"]) + len(calm["label"])
+    for horizon in (1.0, 2.0, 3.0):
+        merged = load_split(tmp_path, "adversarial", horizon)
+        assert len(merged["label"]) == len(windows["ttc_s"]) + len(calm["ttc_s"])
+        assert merged["label"].sum() == round(horizon / result.dt_s)
+    frames = load_frames(tmp_path, "adversarial")
+    assert frames["frames"] == int(windows["frames"][0]) + int(calm["frames"][0])
 
 
 @pytest.mark.slow
@@ -115,7 +129,44 @@ def test_judge_cut_ends_the_windows_at_the_judged_collision(attack_run, tmp_path
     meta = json.loads((tmp_path / "jobs" / f"{name}.json").read_text())
     windows = dict(np.load(tmp_path / "jobs" / f"{name}.npz"))
     assert meta["cut_step"] == meta["judged_step"] == round(crash["metrics"]["collision_time_s"] / result.dt_s)
-    assert windows["last_step"][windows["label"] == 1].max() == meta["cut_step"] - 1
+    positive = labels_for(windows["ttc_s"], MAX_HORIZON_S) == 1
+    assert windows["last_step"][positive].max() == meta["cut_step"] - 1
+    assert windows["ttc_s"][positive].min() == pytest.approx(result.dt_s)
+
+
+@pytest.mark.slow
+def test_skip_scenes_leaves_the_first_scenes_of_the_run_out(attack_run, tmp_path):
+    root = attack_run[0]
+    summary = export([root / "run"], tmp_path, GuardDataConfig(skip_scenes=1), progress=False)
+    # scene_00000 (the crash) is left out: scene_00001 is written, scene_00002 has no candidate
+    assert summary["records"] == 2 and summary["used"] == 1 and summary["skipped"] == {"no_candidate": 1}
+    assert summary["splits"]["adversarial"]["episodes"] == 1
+    assert summary["splits"]["adversarial"]["crashes"] == summary["splits"]["adversarial"]["positives"] == 0
+    written = sorted(p.stem for p in (tmp_path / "jobs").glob("*.npz"))
+    assert written == [job_name("adversarial", "highway-v0", "replay", "manual", 0, "scene_00001")]
+    assert summary["config"]["skip_scenes"] == 1
+    # skipping more scenes than there are writes none; the shares of val count the kept scenes only
+    assert export([root / "run"], tmp_path / "none", GuardDataConfig(skip_scenes=3), progress=False)["records"] == 0
+    assert not list((tmp_path / "none" / "jobs").glob("*.npz"))
+    val = export([root / "run"], tmp_path / "val", GuardDataConfig(split="train", skip_scenes=1, val_fraction=0.5),
+                 progress=False)
+    assert val["records"] == 2 and set(val["splits"]) == {"train"}       # scene_00002 (val) has no candidate
+    with pytest.raises(InputError, match="--skip-scenes"):
+        GuardDataConfig(skip_scenes=-1)
+
+
+@pytest.mark.slow
+def test_cli_skip_scenes(attack_run, tmp_path, capsys):
+    root = attack_run[0]
+    assert adversary_main(["guard-data", "--attacks", str(root / "run"), "--out", str(tmp_path / "g"),
+                           "--skip-scenes", "1", "--quiet"]) == 0
+    assert [p.name.rsplit("_", 1)[-1] for p in (tmp_path / "g" / "jobs").glob("*.npz")] == ["00001.npz"]
+    summary = json.loads((tmp_path / "g" / "adversary_adversarial.json").read_text())
+    assert summary["config"]["skip_scenes"] == 1 and summary["records"] == 2
+    assert adversary_main(["guard-data", "--attacks", str(root / "run"), "--out", str(tmp_path / "h"),
+                           "--skip-scenes", "-1", "--quiet"]) == 2
+    assert "--skip-scenes" in capsys.readouterr().err
+    assert not (tmp_path / "h").exists()
 
 
 def test_contact_onset_walks_back_over_the_unbroken_overlap():

@@ -1,11 +1,12 @@
 """The guard in the closed-loop harness: it slows the ego down, around a planner and around IDM."""
 
+import numpy as np
 import pytest
 
 pytest.importorskip("agentspeak")
 
 from riskmap.guard.aggressors import GUARD_AGGRESSION, AggressorHook
-from riskmap.guard.guarded import GuardConfig, GuardedHumanDriver, GuardedPlanner
+from riskmap.guard.guarded import GuardConfig, GuardedHumanDriver, GuardedPlanner, system2_config
 from riskmap.guard.system2 import DecelerationAgent, System2Config
 from riskmap.planner.baselines import ConstantVelocityPlanner
 from riskmap.sim.episode import make_env
@@ -52,3 +53,33 @@ def test_aggressor_hook_installs_a_scripted_neighbour(env):
     assert type(hook.aggressor).__name__ == "AggressiveVehicle"
     assert hook.aggressor.TIME_WANTED == hook.params.time_gap_s
     assert hook.aggressor.params == GUARD_AGGRESSION and hook.aggressor.params.pace_ahead_m == 5.0
+
+
+class UrgentPredictor:
+    """System 1 stand-in: every neighbour alerts with a short time to contact."""
+
+    alert_threshold = 0.6
+
+    def score(self, states, valid, sizes, kinds, ego, neighbours, last_step, segment_steps):
+        n = len(neighbours)
+        return np.full(n, 0.99), np.full(n, 0.5)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", ["idm", "cv"])
+def test_hard_brake_slows_the_ego_harder_than_the_plain_deceleration(env, kind):
+    hard = GuardConfig(trigger="tgat")
+    if kind == "idm":
+        mild = GuardedHumanDriver(None, _agent(), ALWAYS)
+        urgent = GuardedHumanDriver(UrgentPredictor(), DecelerationAgent(system2_config(hard)), hard)
+    else:
+        mild = GuardedPlanner(ConstantVelocityPlanner(), None, _agent(), ALWAYS)
+        urgent = GuardedPlanner(ConstantVelocityPlanner(), UrgentPredictor(), DecelerationAgent(system2_config(hard)),
+                                hard)
+    run_mild = drive_episode(env, mild, CONFIG, 0)
+    run_hard = drive_episode(env, urgent, CONFIG, 0)
+    summary = urgent.guard.summary()
+    assert summary["frames"] == 6 and summary["hard"] == summary["interventions"] == 6
+    assert {e["ttc_s"] for e in urgent.guard.log} == {0.5}
+    # 6 m/s² against 3 m/s² over 3 s: about 13 m less (½ · 3 · 3²), well beyond 5 m
+    assert run_hard["distance_m"] < run_mild["distance_m"] - 5.0

@@ -64,3 +64,13 @@ def test_scene_separations_marks_absent_agents_inf():
     assert out.shape == (3, 2)
     assert np.isinf(out[0]).all() and np.isinf(out[2, 0])
     assert out[1, 1] == pytest.approx(5.0) and out[2, 1] == pytest.approx(2.0)
+
+
+def test_nearest_by_separation_skips_absent_agents_and_keeps_ties_in_order():
+    from riskmap.guard.events import nearest_by_separation
+
+    ds = np.array([np.inf, 7.0, 3.0, 7.0, np.inf, -0.5])
+    assert nearest_by_separation(ds, 2) == [5, 2]
+    assert nearest_by_separation(ds, 4) == [5, 2, 1, 3]          # the tie in index order
+    assert nearest_by_separation(ds, 10) == [5, 2, 1, 3]         # never an absent one
+    assert nearest_by_separation(np.full(3, np.inf), 2) == []

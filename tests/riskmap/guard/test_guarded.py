@@ -1,3 +1,7 @@
+import json
+from pathlib import Path
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -6,39 +10,48 @@ from riskmap.planner.baselines import ConstantVelocityPlanner
 from riskmap.sim.plan import Planner
 from tests.scenes import state
 
+REPO = Path(__file__).resolve().parents[3]
+
 agentspeak = pytest.importorskip("agentspeak")
 
 from riskmap.guard.system2 import DecelerationAgent, System2Config
 
 
-def scene_with(ego_speed=12.0, other_xy=(20.0, 0.0), steps=6):
-    """Ego at the origin heading +x; one car at `other_xy` heading +x; 0.5 s history of `steps`."""
+def scene_with(ego_speed=12.0, other_xy=(20.0, 0.0), steps=6, more=()):
+    """Ego at the origin heading +x; one car at `other_xy` (and one at each of `more`) heading +x,
+    standing; 0.5 s history of `steps`."""
     from rasterize.scene import Scene
 
     t = 0.5 * np.arange(-(steps - 1), 1)
     ego = [state(ego_speed * ti, 0.0, 0.0, ego_speed) for ti in t]
-    other = [state(other_xy[0], other_xy[1], 0.0, 0.0) for _ in t]
-    return Scene(np.array([ego, other]), np.ones((2, steps), bool), np.array([[5.0, 2.0]] * 2),
-                 np.zeros(2), ego_index=0, current_index=steps - 1, dt=0.5)
+    others = [[state(x, y, 0.0, 0.0) for _ in t] for x, y in [other_xy, *more]]
+    n = 1 + len(others)
+    return Scene(np.array([ego, *others]), np.ones((n, steps), bool), np.array([[5.0, 2.0]] * n),
+                 np.zeros(n), ego_index=0, current_index=steps - 1, dt=0.5)
 
 
 class FixedPredictor:
-    """Stands in for the TGAT: a fixed score per neighbour; remembers what it was asked."""
+    """Stands in for the TGAT: a fixed score and time to contact per neighbour (the same for all,
+    or by agent index from a dict); remembers what it was asked."""
 
     alert_threshold = 0.6
 
-    def __init__(self, score):
-        self.value, self.calls = score, []
+    def __init__(self, score, ttc=5.0):
+        self.value, self.ttc, self.calls = score, ttc, []
+
+    def _of(self, value, neighbours):
+        return np.array([value[i] if isinstance(value, dict) else value for i in neighbours], dtype=np.float64)
 
     def score(self, states, valid, sizes, kinds, ego, neighbours, last_step, segment_steps):
         self.calls.append((list(neighbours), last_step, segment_steps))
-        return np.full(len(neighbours), self.value)
+        return self._of(self.value, neighbours), self._of(self.ttc, neighbours)
 
 
-def make(score=0.9, trigger="tgat", threshold=5.0):
+def make(score=0.9, trigger="tgat", threshold=5.0, ttc=5.0, **config):
     agent = DecelerationAgent(System2Config(speed_threshold_mps=threshold, decel_mps2=3.0, control_hz=2.0))
-    predictor = FixedPredictor(score)
-    return GuardedPlanner(ConstantVelocityPlanner(), predictor, agent, GuardConfig(trigger=trigger)), predictor
+    predictor = FixedPredictor(score, ttc)
+    return (GuardedPlanner(ConstantVelocityPlanner(), predictor, agent, GuardConfig(trigger=trigger, **config)),
+            predictor)
 
 
 def test_decelerated_waypoints_follow_v0_minus_a_t_along_the_path():
@@ -116,8 +129,210 @@ def test_registry_builds_guarded_specs_with_the_shipped_checkpoint():
     guarded_idm = make_planner("guard:idm")
     assert isinstance(guarded_idm, GuardedHumanDriver) and isinstance(guarded_idm, HumanDriver)
     assert guarded_idm.guard.config.trigger == "tgat"
-    assert guarded_idm.guard.predictor.alert_threshold == pytest.approx(0.6)
+    # the threshold is the shipped sidecar's (chosen on validation frames when it was trained)
+    sidecar = json.loads((REPO / "checkpoints" / "guard_tgat.json").read_text())
+    assert guarded_idm.guard.predictor.alert_threshold == pytest.approx(sidecar["alert_threshold"])
+    assert 0.0 <= guarded_idm.guard.predictor.alert_threshold <= 1.0
     always = make_planner("guard-always:cv")
     assert isinstance(always, GuardedPlanner) and always.guard.predictor is None
     assert always.guard.config.trigger == "always"
     assert isinstance(make_planner("guarded:cv"), GuardedPlanner)
+
+
+# -- the hard brake: a warning whose predicted time to contact is short ---------------------------
+
+class FakeVehicle:
+    """The closed-loop ego: records the (acceleration, steering) commands that reach it."""
+
+    def __init__(self):
+        self.sent = []
+
+    def command(self, accel, steer_ccw):
+        self.sent.append((accel, steer_ccw))
+
+
+class FakeRecorder:
+    """Hands the guard the scene it should see as its 6-segment history."""
+
+    def __init__(self, scene):
+        self.current, self.num_steps = scene, 1
+
+    def scene(self, step, **_):
+        return self.current
+
+
+def attached(planner, scene):
+    """`planner` attached to a fake closed-loop run (time 0) whose recording shows `scene`."""
+    run = SimpleNamespace(ego=FakeVehicle(), time_s=0.0, setup=None, recorder=FakeRecorder(scene))
+    planner.attach(run)
+    return run
+
+
+def test_hard_brake_caps_the_acceleration_at_the_hard_deceleration_for_one_frame():
+    planner, _ = make(score=0.9, ttc=0.8)
+    scene = scene_with(ego_speed=12.0, other_xy=(20.0, 0.0))
+    run = attached(planner, scene)
+    vehicle = run.ego
+    plan = planner.plan(scene)
+    assert planner.guard.log[-1]["mode"] == "hard"
+    assert planner.guard.config.hard_decel_mps2 == 6.0
+    assert planner.guard.brake_mps2 == 6.0
+    # the plan is re-timed to v0 − 6 t along the planner's own path
+    cv = ConstantVelocityPlanner().plan(scene).waypoints
+    np.testing.assert_allclose(plan.waypoints, decelerated_waypoints(cv, 12.0, 6.0), atol=1e-12)
+    assert plan.waypoints[0, 0] == pytest.approx(12 * 0.5 - 0.5 * 6.0 * 0.25)
+    # the ego's acceleration is capped at −6 m/s² for this decision frame (0.5 s) …
+    vehicle.command(2.0, 0.1)
+    vehicle.command(-8.0, 0.0)                      # a harder brake of the planner's own stays
+    run.time_s = 0.4
+    vehicle.command(0.0, 0.0)
+    assert vehicle.sent == [(-6.0, 0.1), (-8.0, 0.0), (-6.0, 0.0)]
+    # … and not after it
+    run.time_s = 0.5
+    vehicle.command(1.5, 0.0)
+    assert vehicle.sent[-1] == (1.5, 0.0)
+
+
+def test_a_milder_decision_after_a_hard_brake_uses_the_milder_deceleration():
+    planner, predictor = make(score=0.9, ttc=0.8)
+    scene = scene_with(ego_speed=12.0, other_xy=(20.0, 0.0))
+    run = attached(planner, scene)
+    planner.plan(scene)
+    assert planner.guard.log[-1]["mode"] == "hard"
+    predictor.ttc = 2.5                                # contact no longer close: the sustained plan
+    run.time_s = 0.5
+    plan = planner.plan(scene)
+    assert planner.guard.log[-1]["mode"] == "sustained" and planner.guard.brake_mps2 == 3.0
+    np.testing.assert_allclose(plan.waypoints, decelerated_waypoints(
+        ConstantVelocityPlanner().plan(scene).waypoints, 12.0, 3.0), atol=1e-12)
+    run.ego.command(2.0, 0.0)
+    assert run.ego.sent[-1] == (-3.0, 0.0)
+
+
+def test_hard_brake_deceleration_is_a_guard_setting():
+    planner, _ = make(score=0.9, ttc=0.8, hard_decel_mps2=8.0)
+    scene = scene_with(ego_speed=12.0)
+    run = attached(planner, scene)
+    plan = planner.plan(scene)
+    run.ego.command(0.0, 0.0)
+    assert run.ego.sent == [(-8.0, 0.0)]
+    assert plan.waypoints[0, 0] == pytest.approx(12 * 0.5 - 0.5 * 8.0 * 0.25)
+
+
+def test_hard_brake_below_the_speed_threshold_and_the_log_and_summary():
+    planner, _ = make(score=0.9, ttc=1.0)
+    slow = scene_with(ego_speed=3.0, other_xy=(20.0, 6.0))       # below 5 m/s, nothing ahead
+    planner.reset(slow)
+    planner.plan(slow)
+    planner.plan(slow)
+    entry = planner.guard.log[-1]
+    assert entry["mode"] == "hard" and entry["ttc_s"] == 1.0 and entry["alert"] is True
+    assert entry["max_score"] == pytest.approx(0.9)
+    summary = planner.guard.summary()
+    assert summary["hard"] == 2 and summary["single"] == summary["sustained"] == 0
+    assert summary["interventions"] == 2 and summary["frames"] == 2
+    # without the short time to contact the slow ego is left alone
+    calm, _ = make(score=0.9, ttc=2.5)
+    calm.reset(slow)
+    calm.plan(slow)
+    assert calm.guard.summary()["hard"] == 0 and calm.guard.log == []
+
+
+def test_the_time_to_contact_is_the_highest_scoring_neighbours():
+    # two neighbours: the nearer (agent 1, 20 m ahead) scores lower than agent 2 (10 m aside)
+    scene = scene_with(ego_speed=3.0, other_xy=(20.0, 0.0), more=[(0.0, 10.0)])
+    planner, predictor = make(score={1: 0.7, 2: 0.95}, ttc={1: 0.5, 2: 2.5})
+    planner.reset(scene)
+    planner.plan(scene)
+    assert sorted(predictor.calls[-1][0]) == [1, 2]
+    assert planner.guard.log == []                     # ttc 2.5 s of the top scorer: not urgent
+    planner, _ = make(score={1: 0.95, 2: 0.7}, ttc={1: 0.5, 2: 2.5})
+    planner.reset(scene)
+    planner.plan(scene)
+    assert planner.guard.log[-1]["mode"] == "hard" and planner.guard.log[-1]["ttc_s"] == 0.5
+
+
+class RecordingAgent:
+    """System 2 stand-in: records what the guard tells it."""
+
+    def __init__(self, decision=None):
+        self.decision, self.calls = decision, []
+
+    def reset(self):
+        pass
+
+    def set_speed_threshold(self, speed_mps):
+        pass
+
+    def decide(self, alert, speed_mps, obstacle_ahead, ttc_s=None):
+        self.calls.append((alert, speed_mps, obstacle_ahead, ttc_s))
+        return self.decision
+
+
+@pytest.mark.parametrize("score, ttc_passed", [(0.9, 0.7), (0.59, None)])
+def test_the_guard_passes_a_time_to_contact_only_with_an_alert(score, ttc_passed):
+    from riskmap.guard.guarded import Guard
+
+    agent = RecordingAgent()
+    guard = Guard(FixedPredictor(score, ttc=0.7), agent, GuardConfig())
+    assert guard.step(scene_with(ego_speed=12.0)) is None
+    assert agent.calls == [(score >= 0.6, 12.0, True, ttc_passed)]
+
+
+def test_the_always_trigger_passes_no_time_to_contact():
+    from riskmap.guard.guarded import Guard
+
+    agent = RecordingAgent(decision="single")
+    guard = Guard(None, agent, GuardConfig(trigger="always"))
+    guard.step(scene_with(ego_speed=12.0, other_xy=(20.0, 6.0)))
+    assert agent.calls == [(True, 12.0, False, None)]
+    assert guard.log[-1]["ttc_s"] is None and guard.log[-1]["max_score"] is None
+
+
+def _fresh_checkpoint(path, horizon_s=1.0, threshold=0.37):
+    import torch
+
+    from riskmap.guard.tgat import TGAT, TGATConfig
+    from riskmap.infra.checkpoint import save_checkpoint
+
+    torch.manual_seed(0)
+    config = TGATConfig(horizon_s=horizon_s)
+    model = TGAT(config)
+    save_checkpoint(path, model, {"model": config.to_dict(), "horizon_s": horizon_s, "alert_threshold": threshold,
+                                  "alert_threshold_source": "test"}, kind="guard_tgat")
+    return model
+
+
+def test_predictor_loads_the_sidecars_threshold_and_scores_probabilities_and_ttc(tmp_path):
+    import torch
+
+    from riskmap.guard.features import window_features
+    from riskmap.guard.predictor import AccidentPredictor
+
+    model = _fresh_checkpoint(tmp_path / "ck", horizon_s=1.0, threshold=0.37)
+    predictor = AccidentPredictor.load(tmp_path / "ck")
+    assert predictor.alert_threshold == 0.37 and predictor.model.config.horizon_s == 1.0
+    scene = scene_with(ego_speed=12.0, other_xy=(20.0, 0.0), more=[(0.0, 10.0)])
+    probs, ttc = predictor.score(scene.states, scene.valid, scene.sizes, scene.kinds, 0, [1, 2], 5, 1)
+    assert probs.shape == ttc.shape == (2,) and probs.dtype == ttc.dtype == np.float64
+    assert ((probs > 0) & (probs < 1)).all() and (ttc >= 0).all()
+    parts = [window_features(scene.states, scene.valid, scene.sizes, scene.kinds, 0, i, 5, 1) for i in (1, 2)]
+    with torch.no_grad():
+        logits, ref_ttc = model.eval()(*(torch.from_numpy(np.stack([p[k] for p in parts])) for k in range(4)))
+    np.testing.assert_allclose(probs, 1.0 / (1.0 + np.exp(-logits.double().numpy())), rtol=1e-6)
+    np.testing.assert_allclose(ttc, ref_ttc.double().numpy(), rtol=1e-6)
+    empty = predictor.score(scene.states, scene.valid, scene.sizes, scene.kinds, 0, [], 5, 1)
+    assert len(empty) == 2 and empty[0].shape == empty[1].shape == (0,)
+
+
+def test_make_guarded_reads_the_threshold_and_wires_the_short_ttc(tmp_path):
+    from riskmap.guard.guarded import make_guarded
+
+    _fresh_checkpoint(tmp_path / "ck", threshold=0.42)
+    planner = make_guarded("tgat", "cv", checkpoint=str(tmp_path / "ck"))
+    assert isinstance(planner, GuardedPlanner)
+    assert planner.guard.predictor.alert_threshold == 0.42
+    assert planner.guard.agent.config.short_ttc_s == planner.guard.config.short_ttc_s == 1.5
+    assert planner.guard.agent.config.decel_mps2 == planner.guard.config.decel_mps2
+    assert make_guarded("tgat", "cv", checkpoint=str(tmp_path / "ck"),
+                        alert_threshold=0.9).guard.predictor.alert_threshold == 0.9
