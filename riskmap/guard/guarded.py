@@ -49,7 +49,7 @@ class GuardConfig:
     obstacle_ahead_m: float = 30.0      # x_l: obstacle_ahead if a vehicle is this close ahead …
     obstacle_lateral_m: float = 2.5     # … and at most y_l to either side of the ego's axis (m)
     decel_mps2: float = 3.0             # a
-    hard_decel_mps2: float = 6.0        # the hard brake's deceleration (short time to contact)
+    hard_decel_mps2: float = 8.0        # the hard brake: emergency braking, about 0.8 g (short time to contact)
     short_ttc_s: float = 1.5            # a warning with a predicted time to contact below this is urgent
     decision_hz: int = 2                # f
     # "High speed" per scenario family (m/s): above the family's usual cruising speed band.
@@ -210,6 +210,19 @@ def guarded_idm_class():
 
     class GuardedIDMVehicle(IDMVehicle):
         """The IDM/MOBIL ego, with its acceleration capped at −a while System 2 slows it down."""
+
+        def __deepcopy__(self, memo):
+            """A copy (a road's twin that predicts where traffic goes, e.g. the scripted
+            aggressor's choice of target) drives as the plain IDM vehicle: the guard belongs to
+            the episode, and a twin must not add decisions to its log."""
+            import copy
+
+            twin = IDMVehicle.__new__(IDMVehicle)
+            memo[id(self)] = twin
+            for name, value in vars(self).items():
+                if name not in ("guard", "_acts"):
+                    setattr(twin, name, copy.deepcopy(value, memo))
+            return twin
 
         def act(self, action=None):
             if self.crashed:

@@ -175,18 +175,18 @@ def test_hard_brake_caps_the_acceleration_at_the_hard_deceleration_for_one_frame
     vehicle = run.ego
     plan = planner.plan(scene)
     assert planner.guard.log[-1]["mode"] == "hard"
-    assert planner.guard.config.hard_decel_mps2 == 6.0
-    assert planner.guard.brake_mps2 == 6.0
-    # the plan is re-timed to v0 − 6 t along the planner's own path
+    assert planner.guard.config.hard_decel_mps2 == 8.0
+    assert planner.guard.brake_mps2 == 8.0
+    # the plan is re-timed to v0 − 8 t along the planner's own path
     cv = ConstantVelocityPlanner().plan(scene).waypoints
-    np.testing.assert_allclose(plan.waypoints, decelerated_waypoints(cv, 12.0, 6.0), atol=1e-12)
-    assert plan.waypoints[0, 0] == pytest.approx(12 * 0.5 - 0.5 * 6.0 * 0.25)
-    # the ego's acceleration is capped at −6 m/s² for this decision frame (0.5 s) …
+    np.testing.assert_allclose(plan.waypoints, decelerated_waypoints(cv, 12.0, 8.0), atol=1e-12)
+    assert plan.waypoints[0, 0] == pytest.approx(12 * 0.5 - 0.5 * 8.0 * 0.25)
+    # the ego's acceleration is capped at −8 m/s² for this decision frame (0.5 s) …
     vehicle.command(2.0, 0.1)
-    vehicle.command(-8.0, 0.0)                      # a harder brake of the planner's own stays
+    vehicle.command(-9.0, 0.0)                      # a harder brake of the planner's own stays
     run.time_s = 0.4
     vehicle.command(0.0, 0.0)
-    assert vehicle.sent == [(-6.0, 0.1), (-8.0, 0.0), (-6.0, 0.0)]
+    assert vehicle.sent == [(-8.0, 0.1), (-9.0, 0.0), (-8.0, 0.0)]
     # … and not after it
     run.time_s = 0.5
     vehicle.command(1.5, 0.0)
