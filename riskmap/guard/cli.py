@@ -83,6 +83,8 @@ def add_parsers(sub) -> None:
                              "alert_ratio": "share of validation decision frames that alert: sets the "
                                             "checkpoint's alert threshold"},
                        option_types={name: positive_int for name in ("epochs", "patience", "batch_size")})
+    q.add_argument("--closest-approach", action="store_true",
+                   help="also feed each event's constant-velocity closest approach (distance, time) to the network")
     add_config_options(q, TGATConfig, "horizon_s",
                        help={"horizon_s": "label horizon: a window is positive when the ego touches the "
                                           "neighbour within this many seconds of its last event (≤ 3)"})

@@ -17,6 +17,7 @@ class TGATConfig:
     position_scale_m: float = 20.0   # relative positions are divided by this (clipped to ±5)
     speed_scale_mps: float = 10.0    # speeds and relative velocities are divided by this
     horizon_s: float = 2.0     # the target event this long after the last observed one (features.HORIZONS_S)
+    closest_approach: bool = False   # add each event's constant-velocity closest approach (distance, time)
 
     def to_dict(self) -> dict:
         return asdict(self)

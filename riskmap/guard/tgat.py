@@ -45,9 +45,10 @@ class TimeEncoding(nn.Module):
 
 
 class TemporalAttentionLayer(nn.Module):
-    def __init__(self, hidden: int, time_dim: int, heads: int, dropout: float):
+    def __init__(self, hidden: int, time_dim: int, heads: int, dropout: float, edge_dim: int = EDGE_DIM):
         super().__init__()
-        query_dim = hidden + EDGE_DIM + 2 * time_dim
+        self.edge_dim = edge_dim
+        query_dim = hidden + edge_dim + 2 * time_dim
         self.attention = nn.MultiheadAttention(hidden, heads, dropout=dropout, batch_first=True,
                                                kdim=query_dim, vdim=query_dim)
         self.query = nn.Linear(query_dim, hidden)
@@ -60,7 +61,7 @@ class TemporalAttentionLayer(nn.Module):
         phi_query_zero [2m]; phi_keys [B, Q, 6, 2m] = Φ(τ_q − t_j); key_mask [B, Q, 6] True = usable.
         Returns [B, Q, H]."""
         b, q, h = h_self.shape
-        zero_edge = h_self.new_zeros(b, q, EDGE_DIM)
+        zero_edge = h_self.new_zeros(b, q, self.edge_dim)
         query = self.query(torch.cat([h_self, zero_edge, phi_query_zero.expand(b, q, -1)], -1))
         keys = torch.cat([h_partner_at_events[:, None].expand(b, q, -1, -1),
                           edge[:, None].expand(b, q, -1, -1), phi_keys], -1)       # [B, Q, 6, K]
@@ -82,8 +83,9 @@ class TGAT(nn.Module):
         self.config = config
         self.node = nn.Linear(NODE_DIM, config.hidden)
         self.time = TimeEncoding(config.time_dim)
+        edge_dim = EDGE_DIM + (2 if config.closest_approach else 0)
         self.layers = nn.ModuleList(TemporalAttentionLayer(config.hidden, config.time_dim, config.heads,
-                                                           config.dropout) for _ in range(config.layers))
+                                                           config.dropout, edge_dim) for _ in range(config.layers))
         self.score = nn.Sequential(nn.Linear(2 * config.hidden, config.hidden), nn.ReLU(),
                                    nn.Linear(config.hidden, 2))
         # Query times: the 6 event times then the target time.
@@ -98,12 +100,26 @@ class TGAT(nn.Module):
         scale[2] = self.config.speed_scale_mps
         return node / scale
 
+    def _closest_approach(self, edge: torch.Tensor) -> torch.Tensor:
+        """[B, 6, 2]: at each event, the constant-velocity closest approach of the two centres
+        within the horizon — its distance (÷ position scale, clipped at 5) and its time (÷ horizon).
+        A crossing conflict shows here long before d_s shrinks."""
+        dp, dv = edge[..., 1:3], edge[..., 3:5]
+        horizon = self.config.horizon_s
+        t_star = torch.clamp(-(dp * dv).sum(-1) / ((dv * dv).sum(-1) + 1e-6), 0.0, horizon)
+        d_star = torch.linalg.vector_norm(dp + dv * t_star[..., None], dim=-1)
+        return torch.stack([torch.clamp(d_star / self.config.position_scale_m, 0.0, 5.0), t_star / horizon], -1)
+
     def forward(self, node_u: torch.Tensor, node_i: torch.Tensor, edge: torch.Tensor,
                 mask: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """(logits [B], time to contact [B] in seconds)."""
         b = node_u.shape[0]
         q = self.query_times.numel()
-        edge = torch.clamp(edge / self.edge_scale, -5.0, 5.0) * mask[..., None]
+        derived = self._closest_approach(edge) if self.config.closest_approach else None
+        edge = torch.clamp(edge / self.edge_scale, -5.0, 5.0)
+        if derived is not None:
+            edge = torch.cat([edge, derived], -1)
+        edge = edge * mask[..., None]
         dt = self.query_times[:, None] - self.event_times[None, :]                  # [Q, 6]
         earlier = (dt > 0)[None] & mask[:, None, :]                                  # [B, Q, 6]
         phi_keys = self.time(dt.clamp(min=0.0))[None].expand(b, -1, -1, -1)

@@ -196,3 +196,49 @@ def test_binary_metrics_hand_computed():
     assert math.isclose(m["ap"], (1.0 + 2 / 3) / 2)
     assert m["accuracy"] == 0.5 and m["f1"] == 0.5
     assert binary_metrics(np.zeros(3), np.zeros(3), 0.5)["ap"] is None
+
+
+def test_closest_approach_matches_a_float64_reference():
+    """Distance and time of the constant-velocity closest approach within the horizon, per event."""
+    import numpy as np
+
+    config = TGATConfig(horizon_s=3.0, closest_approach=True)
+    model = TGAT(config)
+    rng = np.random.default_rng(0)
+    edge = rng.normal(0.0, 15.0, size=(64, OBSERVED, EDGE_DIM))
+    edge[0, 0, 1:] = [20.0, 0.0, -10.0, 0.0]     # head-on: closest at t = 2 s, distance 0
+    edge[0, 1, 1:] = [20.0, 0.0, 10.0, 0.0]      # separating: closest now, 20 m
+    edge[0, 2, 1:] = [60.0, 3.0, -10.0, 0.0]     # beyond the horizon: t = 3 s, 30 m ahead still
+    got = model._closest_approach(torch.from_numpy(edge).float()).double().numpy()
+    dp, dv = edge[..., 1:3], edge[..., 3:5]
+    want_t = np.empty(edge.shape[:2])
+    want_d = np.empty(edge.shape[:2])
+    for b in range(edge.shape[0]):
+        for j in range(OBSERVED):
+            times = np.linspace(0.0, 3.0, 30001)                 # brute force over the horizon
+            d = np.linalg.norm(dp[b, j] + times[:, None] * dv[b, j], axis=1)
+            want_t[b, j], want_d[b, j] = times[np.argmin(d)], d.min()
+    np.testing.assert_allclose(got[..., 1] * 3.0, want_t, atol=2e-3)
+    np.testing.assert_allclose(got[..., 0] * 20.0, np.minimum(want_d, 100.0), atol=2e-3)
+    assert got[0, 0, 1] * 3.0 == pytest.approx(2.0, abs=1e-4) and got[0, 0, 0] == pytest.approx(0.0, abs=1e-4)
+    assert got[0, 1, 1] == 0.0 and got[0, 1, 0] * 20.0 == pytest.approx(20.0, abs=1e-3)
+    assert got[0, 2, 1] * 3.0 == pytest.approx(3.0) and got[0, 2, 0] * 20.0 == pytest.approx(np.hypot(30.0, 3.0), abs=1e-3)
+
+
+def test_closest_approach_changes_the_input_width_and_the_scores():
+    import numpy as np
+
+    torch.manual_seed(0)
+    plain, with_ca = TGAT(TGATConfig()), TGAT(TGATConfig(closest_approach=True))
+    assert with_ca.layers[0].edge_dim == plain.layers[0].edge_dim + 2
+    b = 8
+    rng = np.random.default_rng(1)
+    edge = torch.from_numpy(rng.normal(0, 10, size=(b, OBSERVED, EDGE_DIM))).float()
+    node = torch.from_numpy(rng.normal(size=(b, NODE_DIM))).float()
+    mask = torch.ones(b, OBSERVED, dtype=torch.bool)
+    with_ca.eval()
+    before, _ = with_ca(node, node, edge, mask)
+    moved = edge.clone()
+    moved[..., 3:5] *= -1.0                                     # reversed relative velocities
+    after, _ = with_ca(node, node, moved, mask)
+    assert not torch.allclose(before, after)

@@ -126,7 +126,7 @@ def test_train_flags_set_the_horizon_the_ttc_weight_and_the_alert_ratio(fake_dat
     data, ttc = fake_data
     run = tmp_path / "run"
     assert main(["guard", "train", "--data", str(data), "--out", str(run), "--epochs", "1", "--horizon-s", "1",
-                 "--ttc-weight", "0.2", "--alert-ratio", "0.1", "--quiet"]) == 0
+                 "--ttc-weight", "0.2", "--alert-ratio", "0.1", "--closest-approach", "--quiet"]) == 0
     assert "label horizon 1 s" in capsys.readouterr().out
     result = json.loads((run / "result.json").read_text())
     for split, n in SIZES:
@@ -135,10 +135,11 @@ def test_train_flags_set_the_horizon_the_ttc_weight_and_the_alert_ratio(fake_dat
     assert 0 < result["sizes"]["train"]["positives"] < 32             # fewer than at 2 s
     sidecar = json.loads((run / "best.json").read_text())
     assert sidecar["horizon_s"] == 1.0 and sidecar["model"]["horizon_s"] == 1.0
+    assert sidecar["model"]["closest_approach"] is True
     assert sidecar["train"]["ttc_weight"] == 0.2 and sidecar["train"]["alert_ratio"] == 0.1
     assert "0.1" in sidecar["alert_threshold_source"]
     predictor = AccidentPredictor.load(run / "best")
-    assert predictor.model.config.horizon_s == 1.0
+    assert predictor.model.config.horizon_s == 1.0 and predictor.model.config.closest_approach
     assert float(predictor.model.query_times[-1]) == pytest.approx(4.0)
     scores = _threshold_on_validation_frames(predictor, data)
     assert sidecar["alert_threshold"] == brute_force_threshold(scores, 0.1)
