@@ -2,10 +2,23 @@ import numpy as np
 import pytest
 
 from rasterize.errors import InputError
-from riskmap.guard.dataset import (GuardCollectConfig, extract_windows, labels_for, load_frames, load_job,
-                                   load_split, plan_jobs)
-from riskmap.guard.features import (EDGE_DIM, MAX_HORIZON_S, NODE_DIM, OBSERVED, relative_motion,
-                                    window_features)
+from riskmap.guard.dataset import (
+    GuardCollectConfig,
+    extract_windows,
+    labels_for,
+    load_frames,
+    load_job,
+    load_split,
+    plan_jobs,
+)
+from riskmap.guard.features import (
+    EDGE_DIM,
+    MAX_HORIZON_S,
+    NODE_DIM,
+    OBSERVED,
+    relative_motion,
+    window_features,
+)
 from riskmap.infra.atomic import write_npz
 
 CAR = [5.0, 2.0]
