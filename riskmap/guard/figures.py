@@ -28,7 +28,7 @@ def save_training_curves(history: list[dict], path: Path) -> None:
         ax.set_ylim(0, 1.02)
         ax.grid(alpha=0.3)
         ax.legend(loc="lower right")
-    axes[2].plot(epochs, [row["train_loss"] for row in history], label="train BCE")
+    axes[2].plot(epochs, [row["train_loss"] for row in history], label="train loss (BCE + time to contact)")
     axes[2].plot(epochs, [row["val"]["ap"] for row in history], label="val AP (early stopping)")
     axes[2].set_xlabel("epoch")
     axes[2].set_title("training")
