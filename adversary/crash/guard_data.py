@@ -40,7 +40,13 @@ import numpy as np
 
 from rasterize.errors import InputError
 from rasterize.scene import AgentKind
-from riskmap.guard.dataset import GuardCollectConfig, extract_windows, positives_within, split_counts
+from riskmap.guard.dataset import (
+    GuardCollectConfig,
+    extract_windows,
+    finished_job,
+    positives_within,
+    split_counts,
+)
 from riskmap.guard.features import MAX_HORIZON_S
 from riskmap.infra.atomic import write_json, write_npz
 from riskmap.infra.provenance import provenance
@@ -218,12 +224,10 @@ def export(attack_dirs: list[Path], out: Path, config: GuardDataConfig = GuardDa
         scene = attack["scene"]
         job = job_name(split, scene["env_id"], run.planner, run.selector, scene["scene_seed"], name)
         path, meta_path = jobs_dir / f"{job}.npz", jobs_dir / f"{job}.json"
-        if path.exists() or meta_path.exists():
-            if not resume:
-                raise InputError(f"--out {out} already holds {job}; pass --resume to continue or choose another --out")
-            if meta_path.exists() and path.exists():
-                metas.append(json.loads(meta_path.read_text()))
-                continue
+        done = finished_job(jobs_dir, job, out, resume)
+        if done is not None:
+            metas.append(done)
+            continue
         record = load_record(run.scenes / f"{name}.npz")
         planner = cached_planner(run.planner, run.seed)
         rng = np.random.default_rng([zlib.crc32(job.encode()), 11])

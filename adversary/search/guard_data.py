@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from rasterize.errors import InputError
-from riskmap.guard.dataset import GuardCollectConfig, extract_windows, positives_within
+from riskmap.guard.dataset import GuardCollectConfig, extract_windows, finished_job, positives_within
 from riskmap.guard.features import MAX_HORIZON_S
 from riskmap.infra.atomic import write_json, write_npz
 
@@ -83,19 +83,16 @@ def export_search(search_dirs: list[Path], out: Path, split: str, val_fraction: 
         record = json.loads(record_path.read_text())
         job = (f"{job_split}_search_{config['template'].replace('_', '')}_{config['planner'].split(':')[0]}"
                f"_s{config['seed']}_{record_path.stem}")
-        npz, meta_path = jobs_dir / f"{job}.npz", jobs_dir / f"{job}.json"
-        if npz.exists() or meta_path.exists():
-            if not resume:
-                raise InputError(f"--out {out} already holds {job}; pass --resume to continue or choose another --out")
-            if npz.exists() and meta_path.exists():
-                metas.append(json.loads(meta_path.read_text()))
-                continue
+        done = finished_job(jobs_dir, job, out, resume)
+        if done is not None:
+            metas.append(done)
+            continue
         rng = np.random.default_rng([zlib.crc32(job.encode()), 13])
         windows, meta = search_windows(config, np.asarray(record["x"], dtype=np.float64), windows_config, rng)
         meta = {"split": job_split, "job": job, "search": str(path), "evaluation": record_path.stem,
                 "planner": config["planner"], "template": config["template"], "env_id": "highway-v0",
                 "search_collided": bool(record["collided"]), **meta}
-        write_npz(npz, windows)
-        write_json(meta_path, meta)
+        write_npz(jobs_dir / f"{job}.npz", windows)
+        write_json(jobs_dir / f"{job}.json", meta)
         metas.append(meta)
     return metas

@@ -238,6 +238,17 @@ def collect(config: GuardCollectConfig, out: Path, resume: bool = False, progres
     return manifest
 
 
+def finished_job(jobs_dir: Path, job: str, out: Path, resume: bool) -> dict | None:
+    """The meta of job `job` when both its files exist (a resumed export skips it), else None; a job
+    that exists without --resume is an InputError naming --out."""
+    npz, meta = Path(jobs_dir) / f"{job}.npz", Path(jobs_dir) / f"{job}.json"
+    if not (npz.exists() or meta.exists()):
+        return None
+    if not resume:
+        raise InputError(f"--out {out} already holds {job}; pass --resume to continue or choose another --out")
+    return json.loads(meta.read_text()) if npz.exists() and meta.exists() else None
+
+
 def split_counts(metas: list[dict]) -> dict:
     counts = {}
     for m in metas:

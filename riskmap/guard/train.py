@@ -71,6 +71,15 @@ def frame_scores(model: nn.Module, frames: dict) -> np.ndarray:
     return frame_max_scores(probs, frames["frame"], frames["frames"])
 
 
+def choose_threshold(model: nn.Module, val_frames: dict | None, ratio: float) -> tuple[float, str, float | None]:
+    """(alert threshold, where it came from, the validation alert ratio it gives)."""
+    if val_frames is None:
+        return ALERT_THRESHOLD, "fixed (no validation decision frames)", None
+    scores = frame_scores(model, val_frames)
+    threshold = threshold_for_ratio(scores, ratio)
+    return threshold, f"validation frames, target alert ratio {ratio:g}", alert_ratio(scores, threshold)
+
+
 def training_loss(model: nn.Module, batch: list[torch.Tensor], ttc_weight: float) -> torch.Tensor:
     logits, ttc = model(*batch[:4])
     loss = nn.functional.binary_cross_entropy_with_logits(logits, batch[4])
@@ -98,13 +107,7 @@ def train(data: Path, out: Path, config: GuardTrainConfig = GuardTrainConfig(), 
     def publish(epoch: int, history: list[dict], best: dict) -> None:
         """The files derived from the state committed after `epoch`."""
         if best["epoch"] == epoch:
-            if val_frames is None:
-                threshold, source, ratio = ALERT_THRESHOLD, "fixed (no validation decision frames)", None
-            else:
-                scores = frame_scores(model, val_frames)
-                threshold = threshold_for_ratio(scores, config.alert_ratio)
-                source, ratio = f"validation frames, target alert ratio {config.alert_ratio:g}", \
-                    alert_ratio(scores, threshold)
+            threshold, source, ratio = choose_threshold(model, val_frames, config.alert_ratio)
             save_checkpoint(out / "best.safetensors", model, {
                 "kind": CHECKPOINT_KIND, "model": config.model.to_dict(), "train": asdict(config),
                 "horizon_s": horizon_s, "alert_threshold": threshold, "alert_threshold_source": source,
