@@ -132,23 +132,37 @@ def _collision_types(records: list[dict]) -> list[dict]:
 GUARD_PAIR_METRICS = ("collision_rate", "safety_pct", "distance_m")
 
 
-def _guard_pairs(rows: list[dict]) -> list[dict]:
-    """Rows of `guard:SPEC` (or `guarded:SPEC`) next to the same attack on SPEC, when both ran:
-    the metrics off and on, what the guard did (the guarded row's "guard", `_guard_metrics`),
-    `identical` (every metric off equals on, intervals included) and, when identical, `note`:
-    the sentence that says whether the guard acted at all."""
-    by_key = {(r["planner"], r["attack"]): r for r in rows}
+def _scene_of(record: dict) -> tuple:
+    """The scene a job drove: family env, seed and episode (and, recorded, its file and vehicle)."""
+    return (record["env_id"], record["scene_seed"], record["episode"], record.get("recording"),
+            record.get("ego_id"))
+
+
+def _guard_pairs(records: list[dict]) -> list[dict]:
+    """`guard:SPEC` (or `guarded:SPEC`) next to the same attack on SPEC over the scenes both drove
+    (SPEC's other scenes are left out, e.g. a family the guarded planner was not listed on): the
+    metrics off and on, what the guard did (`_guard_metrics`), `identical` (every metric off
+    equals on, intervals included) and, when identical, `note`: the sentence that says whether
+    the guard acted at all."""
+    groups: dict[tuple, list[dict]] = defaultdict(list)
+    for r in records:
+        groups[r["planner"], r["attack"]].append(r)
     pairs = []
-    for (planner, attack), guarded in sorted(by_key.items()):
+    for (planner, attack), guarded in sorted(groups.items()):
         prefix, _, inner = planner.partition(":")
-        if prefix in ("guard", "guarded") and (inner, attack) in by_key:
-            base = by_key[inner, attack]
-            off = {k: base[k] for k in GUARD_PAIR_METRICS}
-            on = {k: guarded[k] for k in GUARD_PAIR_METRICS}
-            pair = {"planner": inner, "attack": attack, "off": off, "on": on,
-                    "guard": guarded["guard"], "identical": off == on}
-            pair["note"] = _guard_note(pair) if pair["identical"] else None
-            pairs.append(pair)
+        if prefix not in ("guard", "guarded") or (inner, attack) not in groups:
+            continue
+        scenes = {_scene_of(r) for r in guarded}
+        base = [r for r in groups[inner, attack] if _scene_of(r) in scenes]
+        if not base:
+            continue
+        off_row, on_row = _group_metrics(base), _group_metrics(guarded)
+        off = {k: off_row[k] for k in GUARD_PAIR_METRICS}
+        on = {k: on_row[k] for k in GUARD_PAIR_METRICS}
+        pair = {"planner": inner, "attack": attack, "off": off, "on": on,
+                "guard": on_row["guard"], "identical": off == on}
+        pair["note"] = _guard_note(pair) if pair["identical"] else None
+        pairs.append(pair)
     return pairs
 
 
@@ -211,7 +225,7 @@ def report_numbers(records: list[dict], gallery: int) -> tuple[dict, dict]:
         "crash_ablation": ablation,
         "search": _rows(search, ("attack", "planner"))[0] if search else None,
         "search_history": _search_history(records),
-        "guard": _guard_pairs(comparison) or None,
+        "guard": _guard_pairs(records) or None,
         "worst": [{**{k: r[k] for k in ("job_id", "planner", "env_id", "scene_seed", "episode", "attack",
                                         "collided", "collided_with_adversary", "collision_type",
                                         "kinematic_mps", "safety_pct", "distance_m")},

@@ -65,3 +65,17 @@ def test_a_guard_that_made_no_decision_says_so():
     [row] = results["guard"]
     assert row["guard"]["frames"] == 0 and row["guard"]["intervention_ratio"] is None
     assert "the guard never intervened (it made no decision: 0 frames)" in row["note"]
+
+
+def test_the_unguarded_side_is_cut_to_the_scenes_the_guarded_planner_drove():
+    """cv drove highway and intersection, guard:cv highway only: off compares on highway alone."""
+    highway = _record("cv-h", "cv", "natural", "baseline", False)
+    intersection = {**_record("cv-i", "cv", "natural", "baseline", True), "env_id": "intersection-v0"}
+    guarded = _record("guard-cv-h", "guard:cv", "natural", "baseline", False, guard=(10, 0, 0))
+    results, _ = report_numbers([highway, intersection, guarded], 0)
+    (pair,) = results["guard"]
+    assert pair["off"]["collision_rate"]["k"] == 0 and pair["off"]["collision_rate"]["n"] == 1
+    assert pair["identical"] and "never intervened (0 of 10 frames)" in pair["note"]
+    # the comparison table still holds both of cv's scenes
+    comparison = {(r["planner"], r["attack"]): r for r in results["comparison"]}
+    assert comparison["cv", "natural"]["collision_rate"]["n"] == 2
