@@ -217,6 +217,8 @@ def attack_records(records: list, models: Models, planner, planner_spec: str, co
                                    "batch_seconds": round(gen.seconds, 3), "batch_size": b,
                                    "losses": gen.losses if i == 0 else None},
                     "tracks": np.round(tracks, 3).tolist(),
+                    # the ego's 10 Hz drive from t = 0 (training windows: `adversary.harden`)
+                    "ego_states": np.round(final.states[final.ego][final.valid[final.ego]], 6).tolist(),
                     "timing": {**timing[i], "rollout_s": round(timing[i]["rollout_s"], 3)},
                     # this scene's rollouts plus an equal share of the batch's optimisation
                     "seconds": shared_s + timing[i]["rollout_s"]})

@@ -40,6 +40,8 @@ from riskmap.sim.metrics import (
 
 COLLISION_IOU = STRIVE.collision_iou            # a collision is a box IoU above this
 OFF_ROAD_FRACTION = STRIVE.off_road_fraction    # off-road when more than this share of the box is off
+# Training windows cut from a drive (`rollout`'s scene_steps): `riskmap collect`'s defaults.
+WINDOW_HISTORY_S, WINDOW_FUTURE_S = 2.0, 6.0
 ACCEL_WINDOW_S = 2.0            # ego acceleration is measured over this long before the collision
 CUT_IN_LOOKBACK_S = 3.0         # a cut-in adversary was beside the ego within this long before
 GAP_RADIUS_M = 40.0             # others farther (centre distance) do not count for the min gap
@@ -126,6 +128,7 @@ class Rollout:
     drive: dict            # drive_episode's record (off_road, distance_m, plan times, ...)
     wall_s: float
     final_scene: object = None   # the last step with its whole history (`keep_scene`), else None
+    scenes: tuple = ()           # `scene_steps`' windows (`rollout`), in their order
 
     def recorder_id(self, log_id: int) -> int:
         """The recorder agent replaying log agent `log_id` (-1 if it never was on the road)."""
@@ -143,14 +146,34 @@ def _no_contact_response(run) -> None:
     run.ego.collidable = False
 
 
+def with_ego_states(log: HumanLog, ego_states: np.ndarray) -> HumanLog:
+    """A copy of `log` whose ego follows `ego_states` [S, 6] (the log's steps, from step 0; valid
+    throughout): what log playback (`replay`) then drives."""
+    ego_states = np.asarray(ego_states, dtype=np.float64)
+    if ego_states.shape != (log.num_steps, 6) or not np.isfinite(ego_states).all():
+        raise InputError(f"ego_states must be finite [{log.num_steps}, 6] (the log's steps), got "
+                         f"{ego_states.shape}")
+    states, valid = log.states.copy(), log.valid.copy()
+    states[log.ego_id], valid[log.ego_id] = ego_states, True
+    return HumanLog(states, valid, log.sizes.copy(), log.kinds.copy(), log.ego_id, log.dt_s,
+                    log.crashed, log.off_road)
+
+
 def rollout(record: SceneRecord, tracks: np.ndarray, rows, planner, planner_spec: str,
-            control_hz: int = 10, replan_hz: int = 2, keep_scene: bool = False) -> Rollout:
+            control_hz: int = 10, replan_hz: int = 2, keep_scene: bool = False,
+            ego_states: np.ndarray | None = None, scene_steps: tuple[int, ...] = ()) -> Rollout:
     """Drive `planner` (made from `planner_spec`) against the log spliced with `tracks` at `rows`
     (module docstring). Empty `rows` (tracks [0, F, 6]) drives against the untouched record.
     `keep_scene`: also keep the last step as a `Scene` with the whole drive as history, at the
     control rate, lanes included (the campaign report's frames). A recorded scene
     (`AttackScene.recording`) is driven on its CommonRoad recording instead, the ego handed over at
-    t0 (`adversary.crash.recorded.rollout_recorded`)."""
+    t0 (`adversary.crash.recorded.rollout_recorded`).
+
+    `ego_states` [S, 6] (the spliced log's steps): the ego follows these states instead of the
+    human's record (with `planner` `replay`: a counterfactual ego, `adversary.harden.windows`).
+    `scene_steps`: 10 Hz steps at which the drive is cut into training windows (2 s of history
+    and 6 s of future at 2 Hz, as `riskmap collect` cuts them; times past the drive invalid),
+    returned in `Rollout.scenes`."""
     from riskmap.sim.log_replay import LogReplayEpisode
     from riskmap.sim.plan import requires_log
     from riskmap.sim.rollout import DriveConfig, DriveHooks, drive_episode
@@ -160,10 +183,13 @@ def rollout(record: SceneRecord, tracks: np.ndarray, rows, planner, planner_spec
     if abs(1.0 / control_hz - record.log.dt_s) > 1e-9:
         raise InputError(f"control_hz={control_hz} differs from the record's {1 / record.log.dt_s:g} Hz")
     log = splice_tracks(record, tracks, rows)
+    if ego_states is not None:
+        log = with_ego_states(log, ego_states)
     if scene.recording:              # a CommonRoad recording: its lanelets, ego handed over at t0
         from adversary.crash.recorded import rollout_recorded
 
-        drove = rollout_recorded(record, log, planner, planner_spec, control_hz, replan_hz, keep_scene)
+        drove = rollout_recorded(record, log, planner, planner_spec, control_hz, replan_hz, keep_scene,
+                                 scene_steps)
         return Rollout(**drove, wall_s=time.perf_counter() - started)
     env = cached_env(scene.env_id, control_hz)
     replay = requires_log(planner)
@@ -182,8 +208,10 @@ def rollout(record: SceneRecord, tracks: np.ndarray, rows, planner, planner_spec
     if keep_scene:
         final_scene = run.recorder.scene(run.recorder.num_steps - 1, history_s=run.time_s,
                                          future_s=0.0, dt_s=run.recorder.dt_s, source=scene.env_id)
+    windows = tuple(run.recorder.scene(k, WINDOW_HISTORY_S, WINDOW_FUTURE_S, WINDOW_DT_S, source=scene.env_id)
+                    for k in scene_steps)
     return Rollout(states, valid, sizes.copy(), ego, run.log_ids(), log.dt_s,
-                   record.t0_step, planner_spec, drive, time.perf_counter() - started, final_scene)
+                   record.t0_step, planner_spec, drive, time.perf_counter() - started, final_scene, windows)
 
 
 def ego_track_2hz(result: Rollout, past_steps: int = 4, future_steps: int = 12) -> np.ndarray:

@@ -333,21 +333,33 @@ def _final_scene(traffic: RecordedTraffic, states: np.ndarray, valid: np.ndarray
                  dt_s: float, source: str) -> Scene:
     """The last step with the whole drive as history (as `TrafficRecorder.scene` cuts it)."""
     k = states.shape[1] - 1
-    at_end = HumanLog(states, valid, traffic.sizes, traffic.kinds, ego, dt_s, False, False)
-    agents = window_rows(at_end, k, FINAL_SCENE_RADIUS_M, FINAL_SCENE_AGENTS)
-    config = CommonRoadSceneConfig()
+    return _scene_at(traffic, states, valid, ego, dt_s, source, k, k, 0, 1, CommonRoadSceneConfig())
+
+
+def _scene_at(traffic: RecordedTraffic, states: np.ndarray, valid: np.ndarray, ego: int, dt_s: float,
+              source: str, k: int, history: int, future: int, stride: int, config: CommonRoadSceneConfig) -> Scene:
+    """The drive at step `k` with `history` and `future` steps of `stride` log steps around it
+    (times outside the drive invalid), as `TrafficRecorder.scene` cuts it; the route by `config`'s
+    rule."""
+    at_k = HumanLog(states, valid, traffic.sizes, traffic.kinds, ego, dt_s, False, False)
+    agents = window_rows(at_k, k, FINAL_SCENE_RADIUS_M, FINAL_SCENE_AGENTS)
     state, others = states[ego, k], agents[1:]
     lanes = lanes_from_lanelets(traffic.scenario.lanelet_network, state[:2], config.lane_radius_m)
     route = traffic.route(ego, state, states[others, k], traffic.sizes[others, 0], k * dt_s, config)
-    return Scene(states[agents], valid[agents], traffic.sizes[agents], traffic.kinds[agents], ego_index=0,
-                 current_index=k, dt=dt_s, lanes=lanes, source=source, time_s=k * dt_s, route_xy=route)
+    times = k + stride * np.arange(-history, future + 1)
+    inside = (times >= 0) & (times < states.shape[1])
+    clipped = np.clip(times, 0, states.shape[1] - 1)
+    return Scene(states[agents][:, clipped], valid[agents][:, clipped] & inside, traffic.sizes[agents],
+                 traffic.kinds[agents], ego_index=0, current_index=history, dt=dt_s * stride, lanes=lanes,
+                 source=source, time_s=k * dt_s, route_xy=route)
 
 
 def rollout_recorded(record: SceneRecord, log: HumanLog, planner, planner_spec: str, control_hz: int = 10,
-                     replan_hz: int = 2, keep_scene: bool = False) -> dict:
+                     replan_hz: int = 2, keep_scene: bool = False, scene_steps: tuple[int, ...] = ()) -> dict:
     """`adversary.crash.judge.rollout` on a recorded scene, against `log` (the spliced record), as
     the module docstring says: the fields of its `Rollout` but the wall time, with the highway
-    path's contract (recorder ids are log agents)."""
+    path's contract (recorder ids are log agents). `scene_steps`' windows are routed as `planner`
+    is (`route_scene_config`)."""
     from riskmap.sim.commonroad_replay import route_scene_config
     from riskmap.sim.record import EpisodeRecord
     from riskmap.sim.rollout import LoopConfig, drive_world
@@ -376,9 +388,13 @@ def rollout_recorded(record: SceneRecord, log: HumanLog, planner, planner_spec: 
         extra={"recording": traffic.name, "ego_id": int(scene.ego_id), "start_s": round(world.start, 3),
                "contact": world.contact, "driver": type(driver).__name__}).as_dict()
     final_scene = _final_scene(traffic, states, valid, ego, log.dt_s, scene.env_id) if keep_scene else None
+    stride = round(WINDOW_DT_S / log.dt_s)
+    windows = tuple(_scene_at(traffic, states, valid, ego, log.dt_s, scene.env_id, k,
+                              round(HISTORY_S / WINDOW_DT_S), record.scene.future_steps, stride,
+                              route_scene_config(planner)) for k in scene_steps)
     return {"states": states, "valid": valid, "sizes": log.sizes.copy(), "ego": ego,
             "log_ids": np.arange(len(log.sizes), dtype=np.int64), "dt_s": log.dt_s, "t0_step": k0,
-            "planner_spec": planner_spec, "drive": drive, "final_scene": final_scene}
+            "planner_spec": planner_spec, "drive": drive, "final_scene": final_scene, "scenes": windows}
 
 
 __all__ = ["RECORDED_ENV", "AttackWorld", "candidates", "log_traffic", "record_recorded_scene", "recorded_log",

@@ -56,27 +56,73 @@ def ego_only_solution(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, 
                for offset in (0.0, *lateral_offsets_m) for accel in accels_mps2)
 
 
-def _clear(states, valid, sizes, ego, collision_step, dt_s, lookback_s, accel, max_speed_mps, near_m,
-           offset_m, blend_s, on_road) -> bool:
-    """True if the ego, braking/accelerating at `accel` along its path shifted sideways by
-    `offset_m` (blended in over `blend_s`), overlaps no other box and stays on the road."""
-    start = max(0, collision_step - round(lookback_s / dt_s))
-    path = states[ego, start:collision_step + 1, :2][valid[ego, start:collision_step + 1]]
-    v0 = float(states[ego, start, 4])
-    others = [a for a in range(states.shape[0]) if a != ego and valid[a, start:collision_step + 1].any()
-              and np.linalg.norm(states[a, start, :2] - states[ego, start, :2]) < near_m + 60.0]
-    length, width = sizes[ego]
-    speed, travelled = v0, 0.0
-    for k in range(1, collision_step - start + 1):
+def alternative_track(states: np.ndarray, valid: np.ndarray, ego: int, start: int, steps: int, dt_s: float,
+                      accel: float, offset_m: float = 0.0, blend_s: float = 2.0, max_speed_mps: float = 40.0,
+                      path_until: int | None = None, turn_heading: bool = True) -> np.ndarray:
+    """The ego's states [steps, 6] (x, y, cos, sin, speed, yaw rate) at steps start + 1 ...
+    start + steps under one alternative: from its recorded state at `start`, constant
+    acceleration `accel` (speed clipped to [0, `max_speed_mps`]) along its own recorded path from
+    `start` to `path_until` (default start + steps; straight on past its end), shifted sideways by
+    `offset_m` (left positive) blended in with a smoothstep over `blend_s`; with `turn_heading` the
+    heading follows the sideways motion, else it stays the path's (the solution check's boxes)."""
+    end = min(states.shape[1] - 1, start + steps if path_until is None else path_until)
+    path = states[ego, start:end + 1, :2][valid[ego, start:end + 1]]
+    speed, travelled = float(states[ego, start, 4]), 0.0
+    out = np.zeros((steps, 6))
+    for k in range(1, steps + 1):
         new_speed = float(np.clip(speed + accel * dt_s, 0.0, max_speed_mps))
         travelled += 0.5 * (speed + new_speed) * dt_s
         speed = new_speed
         point, direction = _along(path, travelled)    # extends the last segment beyond the end
         if offset_m:
             u = min(1.0, k * dt_s / blend_s)
-            point = point + offset_m * u * u * (3.0 - 2.0 * u) * np.array([-direction[1], direction[0]])
-            if not on_road(point, direction, length, width):
-                return False
+            left = np.array([-direction[1], direction[0]])
+            point = point + offset_m * u * u * (3.0 - 2.0 * u) * left
+            if turn_heading:     # the velocity's sideways part: the smoothstep's slope
+                slope = offset_m * 6.0 * u * (1.0 - u) / blend_s if u < 1.0 else 0.0
+                moving = direction * max(speed, 1e-3) + slope * left
+                direction = moving / np.linalg.norm(moving)
+        out[k - 1, :2], out[k - 1, 2:4], out[k - 1, 4] = point, direction, speed
+    heading = np.unwrap(np.arctan2(np.concatenate([states[ego, start:start + 1, 3], out[:, 3]]),
+                                   np.concatenate([states[ego, start:start + 1, 2], out[:, 2]])))
+    out[:, 5] = np.diff(heading) / dt_s
+    return out
+
+
+def first_clear_alternative(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, ego: int, start: int,
+                            until: int, dt_s: float, accels_mps2: tuple[float, ...], offsets_m: tuple[float, ...] = (0.0,),
+                            blend_s: float = 2.0, max_speed_mps: float = 40.0, near_m: float = 40.0,
+                            on_road=None) -> tuple[float, float] | None:
+    """(acceleration, offset) of the first alternative (offsets outer, accelerations inner, in
+    the order given) whose box overlaps no other agent at any step start + 1 ... `until` and, with
+    a sideways offset, stays on the road (`on_road`); None if none does."""
+    for offset in offsets_m:
+        if offset and on_road is None:
+            raise ValueError("lateral alternatives need on_road to keep the ego on the road")
+        for accel in accels_mps2:
+            if _clear(states, valid, sizes, ego, until, dt_s, (until - start) * dt_s, accel, max_speed_mps,
+                      near_m, offset, blend_s, on_road, path_until=states.shape[1] - 1):
+                return accel, offset
+    return None
+
+
+def _clear(states, valid, sizes, ego, collision_step, dt_s, lookback_s, accel, max_speed_mps, near_m,
+           offset_m, blend_s, on_road, path_until=None) -> bool:
+    """True if the ego, braking/accelerating at `accel` along its path shifted sideways by
+    `offset_m` (blended in over `blend_s`), overlaps no other box and stays on the road, from
+    `lookback_s` before `collision_step` to it (its path: up to `path_until`, default the
+    collision step)."""
+    start = max(0, collision_step - round(lookback_s / dt_s))
+    track = alternative_track(states, valid, ego, start, collision_step - start, dt_s, accel, offset_m, blend_s,
+                              max_speed_mps, path_until=collision_step if path_until is None else path_until,
+                              turn_heading=False)
+    others = [a for a in range(states.shape[0]) if a != ego and valid[a, start:collision_step + 1].any()
+              and np.linalg.norm(states[a, start, :2] - states[ego, start, :2]) < near_m + 60.0]
+    length, width = sizes[ego]
+    for k, state in enumerate(track, start=1):
+        point, direction = state[:2], state[2:4]
+        if offset_m and not on_road(point, direction, length, width):
+            return False
         mine = box_corners(point, direction, length, width)
         step = start + k
         for a in others:

@@ -1,0 +1,287 @@
+"""`adversary harden`: fine-tune a risk-map planner on the attacks that beat it, round after round.
+
+Round r (1 ... R) starts from the planner of round r - 1 (round 0: `--checkpoint`):
+
+    RUN/round_r/attack/     CRASH (MAM+ASM) against it on the training scenes (`adversary attack`)
+    RUN/round_r/windows/    each successful attack as training windows (`adversary.harden.windows`)
+    RUN/round_r/data/       those of rounds 1 ... r mixed with natural windows (`adversary.harden.dataset`)
+    RUN/round_r/train/      `riskmap train` from round r - 1's weights on that data
+    RUN/round_r/planner.*   its last epoch, with the original's planning settings (the round's planner)
+
+and the judgement, on held-out scenes with attacks optimised afresh against every round's planner
+(never replayed from another round's):
+
+    RUN/eval/round_r/attack/   CRASH against round r's planner (r = 0: the original)
+    RUN/eval/round_r/natural/  natural traffic: closed loop (`riskmap evaluate`, or recordings with
+                               `riskmap evaluate --commonroad`) and open-loop ADE on the
+                               original's validation windows (ade.json)
+
+RUN/rounds.json sums every round up as it finishes. Every stage writes atomically and is
+resumable: `--resume` goes on from the last file written (a stage's own resume: attacks by
+scene, windows by attack, training by epoch, evaluations by episode).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from rasterize.errors import InputError
+from riskmap.infra.atomic import write_json
+from riskmap.infra.rundir import claim_out_dir
+
+SETTINGS = "harden.json"
+ROUNDS = "rounds.json"
+
+
+@dataclass(frozen=True)
+class HardenConfig:
+    """A hardening run. Seconds, metres; shares in [0, 1)."""
+
+    checkpoint: str                  # the risk-map planner to harden (round 0)
+    scenes: str                      # training attack scenes (`adversary scenes`)
+    natural: str                     # the natural dataset the checkpoint was trained on
+    out: str
+    rounds: int = 2
+    count: int = 60                  # training scenes attacked per round
+    natural_share: float = 0.5       # share of natural windows in a round's training windows
+    epochs: int = 3                  # fine-tuning epochs per round
+    lr: float = 1e-4
+    uncertainty_weight: float | None = None   # v of the IRL loss; None: the checkpoint's
+    replan_every: int = 50           # k of the attack (a risk-map rollout costs ~8 IDM ones)
+    seed: int = 0
+    eval_scenes: str | None = None   # held-out attack scenes (the judgement); None: none
+    eval_count: int = 40
+    natural_env: str | None = None   # closed-loop natural traffic: a highway-env family ...
+    natural_episodes: int = 20
+    natural_seed: int = 2000
+    natural_commonroad: tuple[str, ...] = ()   # ... or held-out recordings
+    ade_windows: int = 100           # open-loop ADE on this many of the original's validation windows
+    traffic_model: str | None = None     # default: checkpoints/crash_traffic_<family>
+    selector_model: str | None = None    # default: checkpoints/crash_selector_<family>
+    workers: int = 1
+    batch_size: int = 8              # scenes optimised together in an attack
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "natural_commonroad", tuple(self.natural_commonroad))
+        for name in ("rounds", "count", "epochs", "eval_count", "natural_episodes", "workers", "batch_size",
+                     "replan_every"):
+            if getattr(self, name) < 1:
+                raise InputError(f"--{name.replace('_', '-')} must be at least 1")
+        if not 0.0 <= self.natural_share < 1.0:
+            raise InputError(f"--natural-share {self.natural_share} must be in [0, 1)")
+        if self.natural_env and self.natural_commonroad:
+            raise InputError("--natural-env and --natural-commonroad: give one of them")
+        if not 0 < self.lr < float("inf"):
+            raise InputError(f"--lr must be a positive number, got {self.lr}")
+
+
+def round_dir(out: Path, r: int) -> Path:
+    return Path(out) / f"round_{r}"
+
+
+def planner_path(config: HardenConfig, r: int) -> Path:
+    """Round r's planner checkpoint (without suffix); round 0 is the original."""
+    if r == 0:
+        return Path(config.checkpoint)
+    return round_dir(config.out, r) / "planner"
+
+
+def planner_spec(config: HardenConfig, r: int) -> str:
+    return f"riskmap:{planner_path(config, r)}"
+
+
+def _attack_config(config: HardenConfig):
+    from adversary.crash.attack import AttackConfig
+
+    return AttackConfig(selector="crash", replan_every=config.replan_every)
+
+
+def _models(config: HardenConfig, scenes: Path) -> tuple[Path, Path]:
+    from adversary.crash.cli import default_models
+
+    return default_models(scenes, config.traffic_model, config.selector_model)
+
+
+def attack(config: HardenConfig, r: int, scenes: Path, count: int, out: Path, progress: bool) -> dict:
+    """CRASH (MAM+ASM) against round r's planner on `count` of `scenes`, into `out` (resumable)."""
+    from adversary.crash.run import run_attacks
+
+    traffic, selectors = _models(config, scenes)
+    return run_attacks(planner_spec(config, r), scenes, count, _attack_config(config), config.seed, out, traffic,
+                       selectors, workers=config.workers, resume=True, progress=progress,
+                       batch_size=config.batch_size)
+
+
+def attack_windows(config: HardenConfig, r: int, progress: bool) -> list[Path]:
+    """Round r's attack records as window shards (ROUND/windows/<scene>.npz + .json); the .json
+    is written last, so a shard counts once it is there. Returns the shards' paths."""
+    from adversary.crash.scenes import load_record
+    from adversary.harden.dataset import write_attack_shard
+    from adversary.harden.windows import hardening_windows
+    from riskmap.registry import make_planner
+
+    here = round_dir(config.out, r)
+    spec = planner_spec(config, r - 1)
+    planner = None
+    shards = []
+    for path in sorted((here / "attack" / "attacks").glob("*.json")):
+        shard = here / "windows" / path.stem
+        shards.append(shard)
+        if shard.with_suffix(".json").exists():
+            continue
+        attack_record = json.loads(path.read_text())
+        if planner is None:
+            planner = make_planner(spec, seed=config.seed)
+        record = load_record(Path(config.scenes) / f"{path.stem}.npz")
+        made = hardening_windows(record, attack_record, planner, spec)
+        write_attack_shard(shard, made.scenes, {**made.info, "attack": str(path)})
+        if progress and made.scenes:
+            print(f"round {r}: {path.stem}: {len(made.scenes)} windows ({made.info.get('demonstration')})",
+                  flush=True)
+    return shards
+
+
+def fine_tune(config: HardenConfig, r: int, shards: list[Path], progress: bool) -> dict:
+    """Round r's training: round r - 1's weights on the mixed data; the last epoch becomes the
+    round's planner, with the original checkpoint's planning settings."""
+    from adversary.harden.dataset import write_round_dataset
+    from riskmap.infra.checkpoint import read_sidecar
+    from riskmap.training.config import TrainConfig
+    from riskmap.training.train import train
+
+    here = round_dir(config.out, r)
+    original = read_sidecar(Path(config.checkpoint))
+    data = write_round_dataset(here / "data", Path(config.natural), original, shards, config.natural_share,
+                               config.seed + r)
+    trained = original["train"]
+    settings = TrainConfig(
+        data=str(here / "data"), out=str(here / "train"), resolution=trained["resolution"],
+        uncertainty_weight=(trained["uncertainty_weight"] if config.uncertainty_weight is None
+                            else config.uncertainty_weight),
+        sigma_x=trained["sigma_x"], sigma_y=trained["sigma_y"], goal_variance=original["irl"]["goal_variance"],
+        goal=trained.get("goal", "route"), epochs=config.epochs, batch_size=trained["batch_size"], lr=config.lr,
+        horizon=trained["horizon"], val_groups=tuple(data["validation_groups"]), seed=config.seed + r,
+        init_checkpoint=str(planner_path(config, r - 1)), predict_s=trained.get("predict_s"))
+    resume = (here / "train" / "state.pt").exists()
+    train(settings, resume=resume, progress=progress)
+    last = here / "train" / "last"
+    side = json.loads(last.with_suffix(".json").read_text())
+    side = {**side, "planning": original.get("planning"), "hardening": {"round": r, "from": str(planner_path(config, r - 1)), "data": data}}
+    side = {k: v for k, v in side.items() if v is not None}
+    shutil.copyfile(last.with_suffix(".safetensors"), here / "planner.safetensors.tmp")
+    (here / "planner.safetensors.tmp").replace(here / "planner.safetensors")
+    write_json(here / "planner.json", side)
+    return {"data": data, "train": side.get("metrics")}
+
+
+def natural_metrics(config: HardenConfig, r: int, out: Path, progress: bool) -> dict:
+    """Round r's planner in natural traffic (closed loop) and open loop on the original's
+    validation windows."""
+    from adversary.harden.dataset import natural_split
+    from riskmap.evaluation.open_loop import evaluate as open_loop
+    from riskmap.infra.checkpoint import read_sidecar
+
+    spec = planner_spec(config, r)
+    result: dict = {}
+    if config.natural_env:
+        from riskmap.evaluation.evaluate import EvalConfig, evaluate
+
+        table = evaluate(EvalConfig(config.natural_env, (spec,), config.natural_episodes, seed=config.natural_seed,
+                                    mode="reactive"), out / "closed_loop", workers=config.workers, resume=True,
+                         progress=progress)["planners"][spec]
+        result["closed_loop"] = {"episodes": table["episodes"], "collision_rate": table["collided_rate"],
+                                 "collisions": round(table["collided_rate"] * table["episodes"]),
+                                 "distance_m": table["distance_m"]["mean"]}
+    elif config.natural_commonroad:
+        from riskmap.evaluation.evaluate_commonroad import evaluate_commonroad
+
+        table = evaluate_commonroad(list(config.natural_commonroad), (spec,), out / "closed_loop",
+                                    seed=config.natural_seed, resume=True, progress=progress,
+                                    workers=config.workers)[spec]
+        result["closed_loop"] = {"episodes": table["episodes"], "collision_rate": table["collision_rate"],
+                                 "collisions": round(table["collision_rate"] * table["episodes"]),
+                                 "at_fault": table["at_fault"], "distance_m": table["distance_m"]["mean"]}
+    ade_path = out / "ade.json"
+    if ade_path.exists():
+        result["open_loop"] = json.loads(ade_path.read_text())
+    else:
+        _, val = natural_split(Path(config.natural), read_sidecar(Path(config.checkpoint)))
+        indices = _validation_indices(Path(config.natural), val, config.ade_windows)
+        result["open_loop"] = open_loop(planner_path(config, r), Path(config.natural), indices=indices,
+                                        seed=config.seed)
+        write_json(ade_path, result["open_loop"])
+    return result
+
+
+def _validation_indices(natural: Path, val_entries: list[dict], limit: int) -> list[int]:
+    """Up to `limit` windows of the natural dataset's validation shards, spread evenly."""
+    import numpy as np
+
+    from riskmap.data.dataset import DemoDataset
+
+    dataset = DemoDataset(natural)
+    files = {str((natural / e["file"]).resolve()) for e in val_entries}
+    shards = {i for i, p in enumerate(dataset.shard_paths) if str(Path(p).resolve()) in files}
+    picks = [i for i in range(len(dataset)) if dataset.episode_of(i) in shards]
+    return [picks[int(j)] for j in np.unique(np.linspace(0, len(picks) - 1, min(limit, len(picks))).astype(int))]
+
+
+def judge_round(config: HardenConfig, r: int, progress: bool) -> dict:
+    """Round r's planner judged: fresh attacks on the held-out scenes, natural traffic."""
+    out = Path(config.out) / "eval" / f"round_{r}"
+    result: dict = {}
+    if config.eval_scenes:
+        result["attack"] = attack(config, r, Path(config.eval_scenes), config.eval_count, out / "attack",
+                                  progress)["summary"]
+    result.update(natural_metrics(config, r, out / "natural", progress))
+    return result
+
+
+def _settings(config: HardenConfig) -> dict:
+    return asdict(config) | {"out": str(config.out)}
+
+
+def harden(config: HardenConfig, resume: bool = False, progress: bool = True) -> dict:
+    """Run (or finish) every round; returns rounds.json's content."""
+    from adversary.crash.run import check_traffic_family, scene_paths
+    from riskmap.infra.checkpoint import read_sidecar
+    from riskmap.registry import make_planner
+
+    out = Path(config.out)
+    read_sidecar(Path(config.checkpoint))                      # a bad input stops here, before any work
+    make_planner(planner_spec(config, 0), seed=config.seed)
+    scene_paths(Path(config.scenes), config.count)
+    traffic, _ = _models(config, Path(config.scenes))
+    check_traffic_family(traffic, Path(config.scenes))
+    if config.eval_scenes:
+        scene_paths(Path(config.eval_scenes), config.eval_count)
+    claim_out_dir(out, holds="a hardening run", marker=SETTINGS, resume=resume, settings_file=SETTINGS,
+                  settings=_settings(config), may_change=("rounds", "workers"))
+    summary = json.loads((out / ROUNDS).read_text()) if resume and (out / ROUNDS).exists() else {"rounds": []}
+    done = {entry["round"]: entry for entry in summary["rounds"]}
+
+    def commit(entry: dict) -> None:
+        done[entry["round"]] = entry
+        summary["rounds"] = [done[k] for k in sorted(done)]
+        write_json(out / ROUNDS, summary)
+
+    if 0 not in done:
+        commit({"round": 0, "planner": planner_spec(config, 0), "judged": judge_round(config, 0, progress)})
+    for r in range(1, config.rounds + 1):
+        if r in done:
+            continue
+        here = round_dir(out, r)
+        if progress:
+            print(f"round {r}: attacking {planner_spec(config, r - 1)} on {config.count} training scenes", flush=True)
+        trained = attack(config, r - 1, Path(config.scenes), config.count, here / "attack", progress)["summary"]
+        shards = attack_windows(config, r, progress)
+        tuned = fine_tune(config, r, shards, progress)
+        commit({"round": r, "planner": planner_spec(config, r), "training_attack": trained, **tuned,
+                "judged": judge_round(config, r, progress)})
+    return summary
+
+
+__all__ = ["HardenConfig", "harden", "planner_path", "planner_spec"]

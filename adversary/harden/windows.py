@@ -1,0 +1,201 @@
+"""Training windows from a successful attack: the attacked scene, a collision-free ego through it.
+
+An attack record (`adversary attack`) holds the adversary's generated trajectory and, since the
+hardening loop, the attacked ego's 10 Hz drive (`ego_states`; older records are driven again).
+From it:
+
+    1. the ego's first collision with the adversary, k_c (the judge's criterion, IoU > 0.02);
+    2. a collision-free alternative from k_s = k_c - `lookback_s`: the judge's solution family
+       (`adversary.crash.solution`), mildest first: constant accelerations along the ego's own
+       path, then one lane width left or right; clear of every box up to the end of the drive
+       (not only to k_c), and on the road;
+    3. failing that, the human's own recorded drive where it collides with nobody (on recorded
+       scenes the ego was the human until t0, so its history is the planner's too);
+    4. the counterfactual drive: log playback of that ego (the planner's states up to k_s, the
+       alternative after) against the spliced log (`judge.rollout` with `ego_states`), checked
+       collision-free again on the boxes it drove, and cut into windows as `riskmap collect` cuts
+       them (2 s of history, 6 s of future at 2 Hz) every `stride_s` from `before_s` before k_s
+       to k_c. The adversary is in every window as the scene's other agents are, so the
+       uncertainty map of a window covers it.
+
+Past the end of the attack (t0 + 6 s) the alternative goes on by its own rule, so every window
+has its full 6 s of demonstrated future; the other agents' futures there are invalid (a sample
+reads only their present and past).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from adversary.crash.judge import (
+    SOLUTION_LATERAL_ACCELS_MPS2,
+    WINDOW_FUTURE_S,
+    WINDOW_HISTORY_S,
+    _first_collision,
+    drivable_area,
+    rollout,
+    splice_tracks,
+)
+from adversary.crash.scenes import WINDOW_DT_S, SceneRecord
+from adversary.crash.solution import alternative_track, first_clear_alternative
+from rasterize.errors import InputError
+from riskmap.sim.metrics import box_off_road
+
+# Mildest first: the demonstration departs as little from the attacked drive as avoids the crash.
+ACCELS_MPS2 = (0.0, -2.0, 1.0, -4.0, 2.0, -6.0, -8.0)
+
+
+@dataclass(frozen=True)
+class HardenWindowConfig:
+    """How an attack becomes windows. Seconds; accelerations m/s²."""
+
+    lookback_s: float = 3.0           # the alternative starts this long before the collision
+    before_s: float = 1.0             # first window this long before the alternative starts
+    stride_s: float = 0.5             # between windows
+    accels_mps2: tuple[float, ...] = ACCELS_MPS2
+    lateral_accels_mps2: tuple[float, ...] = SOLUTION_LATERAL_ACCELS_MPS2
+    human_fallback: bool = True       # the human's own drive where no alternative is clear
+
+    def __post_init__(self) -> None:
+        for name in ("lookback_s", "stride_s"):
+            value = getattr(self, name)
+            if not value > 0 or abs(value / WINDOW_DT_S - round(value / WINDOW_DT_S)) > 1e-9:
+                raise InputError(f"{name}={value} must be a positive multiple of {WINDOW_DT_S} s")
+        if not 0 <= self.before_s < 60:
+            raise InputError(f"before_s={self.before_s} must be in [0, 60) s")
+
+
+@dataclass(frozen=True)
+class HardenWindows:
+    """What one attack gave: its windows (Scenes, possibly none) and how (JSON-ready `info`)."""
+
+    scenes: tuple
+    info: dict
+
+
+def attacked_drive(record: SceneRecord, attack: dict, planner, planner_spec: str) -> tuple:
+    """(states [A, S, 6], valid [A, S], sizes [A, 2], log agent of each row but the last) of the
+    attacked drive with the ego in the last row: the
+    spliced log's agents (they replay it exactly) and the ego as the attack record holds it
+    (`ego_states`), or as the planner drives it again for records from before they did."""
+    tracks, rows = np.asarray(attack["tracks"], dtype=np.float64), attack["metrics"]["spliced_rows"]
+    log = splice_tracks(record, tracks, rows)
+    if attack.get("ego_states") is not None:
+        ego = np.asarray(attack["ego_states"], dtype=np.float64)
+    else:
+        drove = rollout(record, tracks, rows, planner, planner_spec)
+        ego = drove.states[drove.ego][drove.valid[drove.ego]]
+    # Both drives start from the episode's reset state; the record's rounding must not move it.
+    ego[0] = log.states[log.ego_id, 0]
+    steps = min(len(ego), log.num_steps)
+    others = [a for a in range(len(log.sizes)) if a != log.ego_id]
+    states = np.concatenate([log.states[others, :steps], ego[None, :steps]])
+    valid = np.concatenate([log.valid[others, :steps], np.ones((1, steps), bool)])
+    return states, valid, np.concatenate([log.sizes[others], log.sizes[log.ego_id:log.ego_id + 1]]), others
+
+
+def _lane_width_m(record: SceneRecord) -> float:
+    lanes = record.window.lanes
+    return float(np.median([lane.width_m for lane in lanes])) if lanes else 4.0
+
+
+def counterfactual_ego(record: SceneRecord, attack: dict, planner, planner_spec: str,
+                       config: HardenWindowConfig) -> tuple[np.ndarray | None, dict]:
+    """The collision-free ego [S + future, 6] (the log's steps from 0, then `WINDOW_FUTURE_S` more)
+    and how it was found, or (None, why)."""
+    states, valid, sizes, others = attacked_drive(record, attack, planner, planner_spec)
+    ego = len(others)
+    adversary = others.index(int(record.agent_ids[attack["adversary_row"]]))
+    dt = record.log.dt_s
+    k_c, _, _ = _first_collision_arrays(states, valid, sizes, ego, [adversary], record.t0_step)
+    if k_c is None:
+        return None, {"why": "the attacked drive no longer collides with the adversary"}
+    end = states.shape[1] - 1
+    start = max(1, k_c - round(config.lookback_s / dt))
+    extra = round(WINDOW_FUTURE_S / dt)
+    area = drivable_area(record.window.lanes)
+
+    def on_road(centre, heading, length, width):
+        return not box_off_road(np.array([*centre, *heading]), (length, width), area)
+
+    lane = _lane_width_m(record)
+    found = first_clear_alternative(states, valid, sizes, ego, start, end, dt, config.accels_mps2) or \
+        first_clear_alternative(states, valid, sizes, ego, start, end, dt, config.lateral_accels_mps2,
+                                (lane, -lane), on_road=on_road)
+    info = {"collision_step": int(k_c), "start_step": int(start), "end_step": int(end)}
+    if found is not None:
+        accel, offset = found
+        after = alternative_track(states, valid, ego, start, end - start + extra, dt, accel, offset,
+                                  path_until=end)
+        full = np.concatenate([states[ego, :start + 1], after])
+        return full, {**info, "demonstration": "alternative", "accel_mps2": accel, "offset_m": offset}
+    if not config.human_fallback:
+        return None, {**info, "why": "no alternative is clear"}
+    human = splice_tracks(record, np.asarray(attack["tracks"]), attack["metrics"]["spliced_rows"])
+    mine = human.states[human.ego_id, :end + 1]
+    if not human.valid[human.ego_id, :end + 1].all():
+        return None, {**info, "why": "no alternative is clear and the human left the log"}
+    ahead = alternative_track(human.states, human.valid, human.ego_id, end, extra, dt, 0.0)
+    return np.concatenate([mine, ahead]), {**info, "demonstration": "human", "start_step": 0}
+
+
+def _first_collision_arrays(states, valid, sizes, ego, others, from_step):
+    """`judge._first_collision` on bare arrays (no Rollout)."""
+    from types import SimpleNamespace
+
+    return _first_collision(SimpleNamespace(states=states, valid=valid, sizes=sizes), ego, others, from_step)
+
+
+def window_steps(info: dict, config: HardenWindowConfig, dt_s: float, last_step: int) -> tuple[int, ...]:
+    """The 10 Hz steps windows are cut at: every `stride_s` from `before_s` before the alternative
+    starts (never before the window's history fits) to the collision step."""
+    stride = round(config.stride_s / dt_s)
+    first = max(round(WINDOW_HISTORY_S / dt_s), info["start_step"] - round(config.before_s / dt_s))
+    last = min(info["collision_step"], last_step)
+    return tuple(range(first, last + 1, stride))
+
+
+def with_demonstrated_future(scene, ego_full: np.ndarray, step: int, dt_s: float):
+    """`scene` (cut at log step `step`) with the ego's future from `ego_full` wherever the drive
+    had ended (the alternative's own continuation)."""
+    stride = round(scene.dt / dt_s)
+    states, valid = scene.states.copy(), scene.valid.copy()
+    ego, now = scene.ego_index, scene.current_index
+    for j in range(1, states.shape[1] - now):
+        k = step + j * stride
+        if not valid[ego, now + j] and k < len(ego_full):
+            states[ego, now + j], valid[ego, now + j] = ego_full[k], True
+    return replace(scene, states=states, valid=valid)
+
+
+def hardening_windows(record: SceneRecord, attack: dict, planner, planner_spec: str,
+                      config: HardenWindowConfig = HardenWindowConfig()) -> HardenWindows:
+    """The training windows of one attack record (module docstring); none for a record without a
+    collision, without a clear alternative, or whose counterfactual drive still collides."""
+    from riskmap.sim.log_replay import ReplayPlanner
+
+    name = attack.get("name", record.scene.where)
+    if attack.get("status") != "ok" or not attack.get("collision"):
+        return HardenWindows((), {"scene": name, "windows": 0, "why": "no collision"})
+    if attack["metrics"].get("collision_before_t0"):
+        return HardenWindows((), {"scene": name, "windows": 0, "why": "the ego collided before t0"})
+    ego_full, info = counterfactual_ego(record, attack, planner, planner_spec, config)
+    info = {"scene": name, **info}
+    if ego_full is None:
+        return HardenWindows((), {**info, "windows": 0})
+    steps = window_steps(info, config, record.log.dt_s, record.log.num_steps - 1)
+    replay = ReplayPlanner()
+    # Recorded scenes route the windows as the planner under attack is routed (its training rule).
+    replay.route_settings = getattr(planner, "route_settings", None)
+    tracks, rows = np.asarray(attack["tracks"]), attack["metrics"]["spliced_rows"]
+    drove = rollout(record, tracks, rows, replay, "replay", ego_states=ego_full[:record.log.num_steps],
+                    scene_steps=steps)
+    everyone = [a for a in range(len(drove.sizes)) if a != drove.ego]
+    hit, _, _ = _first_collision(drove, drove.ego, everyone, 0)
+    if hit is not None:
+        return HardenWindows((), {**info, "windows": 0, "why": f"the counterfactual drive collides at step {hit}"})
+    scenes = tuple(with_demonstrated_future(scene, ego_full, k, record.log.dt_s)
+                   for scene, k in zip(drove.scenes, steps))
+    return HardenWindows(scenes, {**info, "windows": len(scenes), "steps": list(steps)})
