@@ -200,7 +200,7 @@ def natural_metrics(config: HardenConfig, r: int, out: Path, progress: bool) -> 
 
         table = evaluate_commonroad(list(config.natural_commonroad), (spec,), out / "closed_loop",
                                     seed=config.natural_seed, resume=True, progress=progress,
-                                    workers=config.workers)[spec]
+                                    workers=config.workers, mode="reactive")[spec]
         result["closed_loop"] = {"episodes": table["episodes"], "collision_rate": table["collision_rate"],
                                  "collisions": round(table["collision_rate"] * table["episodes"]),
                                  "at_fault": table["at_fault"], "distance_m": table["distance_m"]["mean"]}

@@ -1,0 +1,148 @@
+"""The hardening loop's parts: collision-free alternatives, attack windows, the mixed data, the CLI."""
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from adversary.cli import main as adversary_main
+from adversary.crash.judge import box_iou, braking_track, judge, splice_tracks
+from adversary.crash.scenes import AttackScene, record_attack_scene
+from adversary.crash.solution import alternative_track, first_clear_alternative
+from adversary.harden.dataset import ADVERSARIAL_GROUP, write_attack_shard, write_round_dataset
+from adversary.harden.loop import HardenConfig
+from adversary.harden.windows import hardening_windows
+from rasterize.errors import InputError
+from riskmap.data.dataset import DemoDataset
+from riskmap.registry import cached_planner
+
+DT = 0.1
+
+
+def _straight(speed_mps: float, steps: int) -> np.ndarray:
+    """An ego [steps, 6] driving along +x at a constant speed."""
+    t = DT * np.arange(steps)
+    return np.column_stack([speed_mps * t, np.zeros(steps), np.ones(steps), np.zeros(steps),
+                            np.full(steps, speed_mps), np.zeros(steps)])
+
+
+def test_alternative_track_keeps_the_path_and_blends_the_offset_in():
+    states = _straight(10.0, 60)[None]
+    valid = np.ones((1, 60), bool)
+    same = alternative_track(states, valid, 0, 0, 59, DT, 0.0)
+    np.testing.assert_allclose(same[:, :5], states[0, 1:, :5], atol=1e-9)
+    braking = alternative_track(states, valid, 0, 0, 59, DT, -4.0)
+    assert braking[-1, 4] == 0.0 and braking[-1, 0] == pytest.approx(10.0 ** 2 / 8.0, abs=0.3)
+    shifted = alternative_track(states, valid, 0, 0, 59, DT, 0.0, offset_m=3.5, blend_s=2.0)
+    assert shifted[-1, 1] == pytest.approx(3.5) and shifted[5, 3] > 0      # turned left while moving over
+    np.testing.assert_allclose(shifted[-1, 2:4], [1.0, 0.0], atol=1e-9)   # and straight again after
+
+
+def test_first_clear_alternative_tries_the_mildest_first():
+    ego = _straight(10.0, 61)
+    stopped = np.tile([40.0, 0.0, 1.0, 0.0, 0.0, 0.0], (61, 1))   # a car standing 40 m ahead
+    states, valid = np.stack([stopped, ego]), np.ones((2, 61), bool)
+    sizes = np.array([[5.0, 2.0], [5.0, 2.0]])
+    assert first_clear_alternative(states, valid, sizes, 1, 0, 60, DT, (0.0, 1.0)) is None
+    # -2 m/s² stops the ego 25 m on, short of the car; -4 too, but -2 is tried first
+    assert first_clear_alternative(states, valid, sizes, 1, 0, 60, DT, (0.0, -2.0, -4.0)) == (-2.0, 0.0)
+    with pytest.raises(ValueError, match="on_road"):
+        first_clear_alternative(states, valid, sizes, 1, 0, 60, DT, (0.0,), (3.5,))
+
+
+# Episode 9 of highway-v0 seed 0: window row 3 drives ahead of the ego; braking hard in front of
+# the played-back human it is rear-ended (tests/adversary/crash/test_guard_data.py).
+SCENE, AHEAD = AttackScene("highway-v0", 0, 9), 3
+
+
+@pytest.fixture(scope="module")
+def rear_ended():
+    record = record_attack_scene(SCENE)
+    tracks = braking_track(record, AHEAD, decel_mps2=8.0)[None]
+    metrics = judge(record, tracks, [AHEAD], AHEAD, cached_planner("replay"), "replay")
+    assert metrics["collision"]
+    attack = {"name": "scene_00009", "status": "ok", "collision": True, "adversary_row": AHEAD,
+              "metrics": metrics, "tracks": tracks.tolist()}
+    return record, attack
+
+
+@pytest.mark.slow
+def test_attack_windows_avoid_the_adversary_with_a_full_future(rear_ended):
+    record, attack = rear_ended
+    made = hardening_windows(record, attack, cached_planner("replay"), "replay")
+    info = made.info
+    assert info["demonstration"] == "alternative" and len(made.scenes) == info["windows"] >= 5
+    assert info["collision_step"] - 5 < info["steps"][-1] <= info["collision_step"] and info["steps"][0] < info["start_step"]
+    log = splice_tracks(record, np.asarray(attack["tracks"]), [AHEAD])
+    adversary = int(record.agent_ids[AHEAD])
+    for scene, step in zip(made.scenes, info["steps"]):
+        now = scene.current_index
+        assert scene.valid[0, now:].all() and scene.states.shape[1] == now + 13     # 6 s ahead at 2 Hz
+        assert scene.time_s == pytest.approx(step * DT)
+        for j in range(1, 13):               # the demonstrated future never touches the adversary
+            k = step + 5 * j
+            if k < log.num_steps:
+                assert box_iou(scene.states[0, now + j], scene.sizes[0], log.states[adversary, k],
+                               log.sizes[adversary]) == 0.0
+    # The attacked drive (the human braking too late) did collide where the windows now avoid it.
+    assert attack["metrics"]["collision_time_s"] == pytest.approx(info["collision_step"] * DT)
+
+
+@pytest.mark.slow
+def test_no_windows_from_an_attack_without_a_collision(rear_ended):
+    record, attack = rear_ended
+    made = hardening_windows(record, {**attack, "collision": False}, cached_planner("replay"), "replay")
+    assert made.scenes == () and made.info["why"] == "no collision"
+
+
+@pytest.mark.slow
+def test_round_data_mixes_attack_and_natural_windows_and_keeps_the_original_validation(rear_ended, tmp_path):
+    from riskmap.data.collect import CollectConfig, collect
+
+    record, attack = rear_ended
+    natural = tmp_path / "natural"
+    collect(CollectConfig("highway-v0", episodes=4, seed=11), natural, progress=False)
+    made = hardening_windows(record, attack, cached_planner("replay"), "replay")
+    write_attack_shard(tmp_path / "windows" / "scene_00009", made.scenes, made.info)
+    write_attack_shard(tmp_path / "windows" / "scene_00010", (), {"windows": 0, "why": "no collision"})
+    sidecar = {"train": {"val_fraction": 0.15}, "dataset": {}}
+    summary = write_round_dataset(tmp_path / "data", natural, sidecar,
+                                  [tmp_path / "windows" / "scene_00009", tmp_path / "windows" / "scene_00010"],
+                                  natural_share=0.5, seed=0)
+    dataset = DemoDataset(tmp_path / "data")
+    groups = [dataset.group_of(i) for i in range(len(dataset))]
+    assert summary["attack_windows"] == groups.count(ADVERSARIAL_GROUP) == len(made.scenes)
+    assert summary["validation_groups"] == ["natural-3"]          # the last of 4 episodes, as trained
+    assert summary["natural_windows"] >= summary["attack_windows"] and summary["natural_shards"] >= 1
+    assert len(dataset) == (summary["attack_windows"] + summary["natural_windows"]
+                            + summary["validation_windows"])
+    sample = dataset[0]
+    assert sample["future"].shape == (12, 2) and math.isfinite(float(sample["demo"].sum()))
+    only_attacks = write_round_dataset(tmp_path / "attacks_only", natural, sidecar,
+                                       [tmp_path / "windows" / "scene_00009"], natural_share=0.0, seed=0)
+    assert only_attacks["natural_windows"] == 0
+    with pytest.raises(InputError, match="no attack gave training windows"):
+        write_round_dataset(tmp_path / "none", natural, sidecar, [tmp_path / "windows" / "scene_00010"],
+                            natural_share=0.5, seed=0)
+
+
+def test_bad_settings_are_one_line_errors(tmp_path, capsys):
+    with pytest.raises(InputError, match="natural-share"):
+        HardenConfig("c", "s", "n", "o", natural_share=1.0)
+    with pytest.raises(InputError, match="--rounds"):
+        HardenConfig("c", "s", "n", "o", rounds=0)
+    code = adversary_main(["harden", "--checkpoint", str(tmp_path / "missing"), "--scenes", str(tmp_path),
+                           "--natural", str(tmp_path), "--out", str(tmp_path / "run")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code != 0 and len(err) == 1 and "missing" in err[0]
+    assert not (tmp_path / "run").exists()
+
+
+def test_report_needs_a_run(tmp_path, capsys):
+    assert adversary_main(["harden-report", str(tmp_path)]) != 0
+    assert "rounds.json" in capsys.readouterr().err
+    (tmp_path / "rounds.json").write_text(json.dumps({"rounds": [{"round": 0, "judged": {}}]}))
+    (tmp_path / "harden.json").write_text(json.dumps({"checkpoint": "x"}))
+    assert adversary_main(["harden-report", str(tmp_path)]) == 0
+    assert "Hardening rounds" in (tmp_path / "report.html").read_text()
