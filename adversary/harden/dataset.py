@@ -49,8 +49,11 @@ def _natural_group(entry: dict) -> str:
 def natural_split(natural: Path, sidecar: dict) -> tuple[list[dict], list[dict]]:
     """(training, validation) index entries of the natural dataset as the original checkpoint's
     training split them: its recorded `val_groups`, else its last `val_fraction` of episodes."""
-    index = json.loads((Path(natural) / INDEX).read_text())
-    entries = [e for e in index["shards"] if e["windows"] > 0]
+    try:
+        entries = [e for e in json.loads((Path(natural) / INDEX).read_text())["shards"] if e["windows"] > 0]
+    except (OSError, ValueError, KeyError, TypeError):
+        raise InputError(f"--natural {natural}: {INDEX} is missing or unreadable; pass a dataset from "
+                         "`riskmap collect`") from None
     held = set(sidecar.get("dataset", {}).get("val_groups") or ())
     if held:
         val = [e for e in entries if e.get("group") in held]

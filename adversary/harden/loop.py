@@ -229,6 +229,21 @@ def _validation_indices(natural: Path, val_entries: list[dict], limit: int) -> l
     return [picks[int(j)] for j in np.unique(np.linspace(0, len(picks) - 1, min(limit, len(picks))).astype(int))]
 
 
+def check_natural(natural: Path, sidecar: dict) -> None:
+    """InputError unless `natural` is a dataset drawn as the checkpoint was trained (its raster)
+    whose split the checkpoint's can be rebuilt on."""
+    from adversary.harden.dataset import natural_split
+    from riskmap.data.dataset import collected_raster_config, load_manifest
+
+    load_manifest(natural)
+    drawn = collected_raster_config(natural).to_dict()
+    trained = {k: v for k, v in sidecar["raster"].items() if k != "predict_s"}
+    if {k: v for k, v in drawn.items() if k != "predict_s"} != trained:
+        raise InputError(f"--natural {natural} was collected with another raster than {sidecar['raster']}; "
+                         "pass the dataset the checkpoint was trained on")
+    natural_split(natural, sidecar)
+
+
 def judge_round(config: HardenConfig, r: int, progress: bool) -> dict:
     """Round r's planner judged: fresh attacks on the held-out scenes, natural traffic."""
     out = Path(config.out) / "eval" / f"round_{r}"
@@ -251,8 +266,17 @@ def harden(config: HardenConfig, resume: bool = False, progress: bool = True) ->
     from riskmap.registry import make_planner
 
     out = Path(config.out)
-    read_sidecar(Path(config.checkpoint))                      # a bad input stops here, before any work
+    original = read_sidecar(Path(config.checkpoint))           # a bad input stops here, before any work
     make_planner(planner_spec(config, 0), seed=config.seed)
+    check_natural(Path(config.natural), original)
+    if config.natural_env:
+        from rasterize.config import family_of_env
+
+        family_of_env(config.natural_env)
+    if config.natural_commonroad:
+        from riskmap.data.collect_commonroad import scenario_files
+
+        scenario_files(list(config.natural_commonroad), flag="--natural-commonroad")
     scene_paths(Path(config.scenes), config.count)
     traffic, _ = _models(config, Path(config.scenes))
     check_traffic_family(traffic, Path(config.scenes))

@@ -591,6 +591,7 @@ SCENES = ("adversary", "scenes")
 ATTACK = ("adversary", "attack")
 GUARD_DATA = ("adversary", "guard-data")
 TRAFFIC = ("adversary", "train-traffic")
+HARDEN = ("adversary", "harden")
 
 
 def R(id, argv, names, **kw):
@@ -1166,6 +1167,26 @@ add(
     attack_row("out-under-file", SC(), UNDER_FILE_NAMES, out_arg=under_file, out=under_file),
 )
 
+# adversary harden: the intersection checkpoint with its kind of data, highway attack scenes
+def harden_row(id, names, *, checkpoint=RM, natural=None, scenes=None, extra=(), **kw):
+    return R(f"harden/{id}", _argv(*HARDEN, "--checkpoint", checkpoint, "--natural", natural or ds(),
+                                   "--scenes", scenes or SC(), "--count", "1", "--quiet", *extra,
+                                   "--out", kw.pop("out_arg", OUT)), names, **kw)
+
+
+add(
+    harden_row("checkpoint-missing", S(missing("nock")), checkpoint=missing("nock")),
+    harden_row("checkpoint-guard-kind", S(ck(GUARD_SRC)), checkpoint=ck(GUARD_SRC)),
+    harden_row("natural-missing", S(missing("nodata")), natural=missing("nodata")),
+    harden_row("natural-other-raster", S(ds()), checkpoint="checkpoints/riskmap_highway"),
+    harden_row("natural-share-one", S("--natural-share"), extra=("--natural-share", "1")),
+    harden_row("natural-env-unknown", S("nope-v0"), extra=("--natural-env", "nope-v0")),
+    harden_row("scenes-missing", S(missing("noscenes")), scenes=missing("noscenes")),
+    harden_row("count-too-many", S("--count"), extra=("--count", "5")),
+    harden_row("rounds-zero", S("--rounds"), extra=("--rounds", "0"), usage=True),
+    harden_row("out-under-file", UNDER_FILE_NAMES, out_arg=under_file, out=under_file),
+)
+
 AR = lambda variant="good": (lambda fx, t: fx.attack_run(variant))
 
 
@@ -1263,7 +1284,7 @@ def run_in_process(argv: list[str], capsys) -> tuple[int, str, str]:
 # Commands with a progress bar (on stderr) run with --quiet, as scripts run them: a bar drawn
 # before the error is progress, not an error line.
 QUIET = {"collect", "train", "train-baseline", "drive", "check-planner", "evaluate", "guard collect", "guard train",
-         "stress-test", "search", "train-traffic", "train-selector", "scenes", "attack", "guard-data"}
+         "stress-test", "search", "train-traffic", "train-selector", "scenes", "attack", "guard-data", "harden"}
 
 
 def check_row(row: Row, fx: Fixtures, t: Path, run) -> None:
@@ -1334,4 +1355,4 @@ def test_every_command_has_rows():
     assert commands >= {
         "collect", "train", "train-baseline", "drive", "check-planner", "evaluate", "tune-goal-variance", "figures-scenes",
         "figures-plans", "guard-collect", "guard-train", "guard-evaluate", "stress-test", "report", "search",
-        "search-report", "train-selector", "scenes", "attack", "guard-data", "train-traffic"}
+        "search-report", "train-selector", "scenes", "attack", "guard-data", "train-traffic", "harden"}
