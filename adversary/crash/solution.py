@@ -20,6 +20,7 @@ import numpy as np
 
 from rasterize.frames import box_corners
 from rasterize.geometry import boxes_overlap
+from riskmap.sim.metrics import min_box_gap
 
 DEFAULT_ACCELS_MPS2 = (-8.0, -6.0, -4.0, -2.0, 0.0, 1.0, 2.0, 3.0)
 
@@ -106,12 +107,34 @@ def first_clear_alternative(states: np.ndarray, valid: np.ndarray, sizes: np.nda
     return None
 
 
+def safest_clear_alternative(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, ego: int, start: int,
+                             until: int, dt_s: float, accels_mps2: tuple[float, ...],
+                             offsets_m: tuple[float, ...] = (0.0,), blend_s: float = 2.0,
+                             max_speed_mps: float = 40.0, near_m: float = 40.0,
+                             on_road=None) -> tuple[float, float] | None:
+    """(acceleration, offset) of the clear alternative (as `first_clear_alternative` judges it)
+    that keeps the largest smallest box gap (m) to every other agent within `near_m` over steps
+    start + 1 ... `until`; the first in the order given among equals; None if none is clear."""
+    best, best_gap = None, -np.inf
+    for offset in offsets_m:
+        if offset and on_road is None:
+            raise ValueError("lateral alternatives need on_road to keep the ego on the road")
+        for accel in accels_mps2:
+            gaps: list[float] = []
+            if _clear(states, valid, sizes, ego, until, dt_s, (until - start) * dt_s, accel, max_speed_mps,
+                      near_m, offset, blend_s, on_road, path_until=states.shape[1] - 1, gaps=gaps):
+                gap = min(gaps, default=np.inf)
+                if gap > best_gap:
+                    best, best_gap = (accel, offset), gap
+    return best
+
+
 def _clear(states, valid, sizes, ego, collision_step, dt_s, lookback_s, accel, max_speed_mps, near_m,
-           offset_m, blend_s, on_road, path_until=None) -> bool:
+           offset_m, blend_s, on_road, path_until=None, gaps: list | None = None) -> bool:
     """True if the ego, braking/accelerating at `accel` along its path shifted sideways by
     `offset_m` (blended in over `blend_s`), overlaps no other box and stays on the road, from
     `lookback_s` before `collision_step` to it (its path: up to `path_until`, default the
-    collision step)."""
+    collision step). `gaps`, when given, receives the smallest box gap (m) of every step."""
     start = max(0, collision_step - round(lookback_s / dt_s))
     track = alternative_track(states, valid, ego, start, collision_step - start, dt_s, accel, offset_m, blend_s,
                               max_speed_mps, path_until=collision_step if path_until is None else path_until,
@@ -125,10 +148,14 @@ def _clear(states, valid, sizes, ego, collision_step, dt_s, lookback_s, accel, m
             return False
         mine = box_corners(point, direction, length, width)
         step = start + k
+        near = []
         for a in others:
             if not valid[a, step] or np.linalg.norm(states[a, step, :2] - point) > near_m:
                 continue
             theirs = box_corners(states[a, step, :2], states[a, step, 2:4], *sizes[a])
             if boxes_overlap(mine, theirs):
                 return False
+            near.append(theirs)
+        if gaps is not None:
+            gaps.append(min_box_gap(mine, near))
     return True

@@ -42,6 +42,8 @@ HELP = {
     "epochs": "fine-tuning epochs per round",
     "lr": "fine-tuning learning rate",
     "uncertainty_weight": "v of the IRL loss while fine-tuning (default: the checkpoint's)",
+    "demonstration": "which collision-free alternative demonstrates: safest (most room to every vehicle) "
+                     "or mildest (least change from the attacked drive)",
     "replan_every": "k: the attack re-runs the planner every k iterations",
     "eval_scenes": "held-out attack scenes: every round's planner is attacked afresh on them",
     "eval_count": "held-out scenes attacked per round",
@@ -65,7 +67,8 @@ def add_parsers(subparsers) -> None:
                        option_types={name: positive_int for name in ("rounds", "count", "epochs", "eval_count",
                                                                      "natural_episodes", "workers",
                                                                      "batch_size", "replan_every",
-                                                                     "ade_windows")})
+                                                                     "ade_windows")},
+                       choices={"demonstration": ("safest", "mildest")})
     p.add_argument("--natural-commonroad", nargs="+", default=(), metavar="DIR_OR_FILE",
                    help=HELP["natural_commonroad"])
     p.add_argument("--resume", action="store_true", help="go on from the last file written")

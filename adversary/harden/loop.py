@@ -50,6 +50,7 @@ class HardenConfig:
     epochs: int = 3                  # fine-tuning epochs per round
     lr: float = 1e-4
     uncertainty_weight: float | None = None   # v of the IRL loss; None: the checkpoint's
+    demonstration: str = "safest"    # which collision-free alternative demonstrates (HardenWindowConfig.choice)
     replan_every: int = 50           # k of the attack (a risk-map rollout costs ~8 IDM ones)
     seed: int = 0
     eval_scenes: str | None = None   # held-out attack scenes (the judgement); None: none
@@ -74,6 +75,8 @@ class HardenConfig:
             raise InputError(f"--natural-share {self.natural_share} must be in [0, 1)")
         if self.natural_env and self.natural_commonroad:
             raise InputError("--natural-env and --natural-commonroad: give one of them")
+        if self.demonstration not in ("safest", "mildest"):
+            raise InputError(f"--demonstration {self.demonstration!r} must be safest or mildest")
         if not 0 < self.lr < float("inf"):
             raise InputError(f"--lr must be a positive number, got {self.lr}")
 
@@ -120,7 +123,7 @@ def attack_windows(config: HardenConfig, r: int, progress: bool) -> list[Path]:
     is written last, so a shard counts once it is there. Returns the shards' paths."""
     from adversary.crash.scenes import load_record
     from adversary.harden.dataset import write_attack_shard
-    from adversary.harden.windows import hardening_windows
+    from adversary.harden.windows import HardenWindowConfig, hardening_windows
     from riskmap.registry import make_planner
 
     here = round_dir(config.out, r)
@@ -136,7 +139,7 @@ def attack_windows(config: HardenConfig, r: int, progress: bool) -> list[Path]:
         if planner is None:
             planner = make_planner(spec, seed=config.seed)
         record = load_record(Path(config.scenes) / f"{path.stem}.npz")
-        made = hardening_windows(record, attack_record, planner, spec)
+        made = hardening_windows(record, attack_record, planner, spec, HardenWindowConfig(choice=config.demonstration))
         write_attack_shard(shard, made.scenes, {**made.info, "attack": str(path)})
         if progress and made.scenes:
             print(f"round {r}: {path.stem}: {len(made.scenes)} windows ({made.info.get('demonstration')})",

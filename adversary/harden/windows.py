@@ -5,10 +5,10 @@ hardening loop, the attacked ego's 10 Hz drive (`ego_states`; older records are 
 From it:
 
     1. the ego's first collision with the adversary, k_c (the judge's criterion, IoU > 0.02);
-    2. a collision-free alternative from k_s = k_c - `lookback_s`: the judge's solution family
-       (`adversary.crash.solution`), mildest first: constant accelerations along the ego's own
-       path, then one lane width left or right; clear of every box up to the end of the drive
-       (not only to k_c), and on the road;
+    2. a collision-free alternative from k_s = k_c - `lookback_s`: of the judge's solution family
+       (`adversary.crash.solution`: constant accelerations along the ego's own path, else one
+       lane width left or right), clear of every box up to the end of the drive (not only to
+       k_c) and on the road, the one that keeps the most room to every other vehicle (`choice`);
     3. failing that, the human's own recorded drive where it collides with nobody (on recorded
        scenes the ego was the human until t0, so its history is the planner's too);
     4. the counterfactual drive: log playback of that ego (the planner's states up to k_s, the
@@ -39,12 +39,12 @@ from adversary.crash.judge import (
     splice_tracks,
 )
 from adversary.crash.scenes import WINDOW_DT_S, SceneRecord
-from adversary.crash.solution import alternative_track, first_clear_alternative
+from adversary.crash.solution import alternative_track, first_clear_alternative, safest_clear_alternative
 from rasterize.errors import InputError
 from riskmap.sim.metrics import box_off_road
 
-# Mildest first: the demonstration departs as little from the attacked drive as avoids the crash.
-ACCELS_MPS2 = (0.0, -2.0, 1.0, -4.0, 2.0, -6.0, -8.0)
+# Accelerations tried along the path, mildest first.
+ACCELS_MPS2 = (0.0, -2.0, 1.0, -4.0, 2.0, -6.0, -8.0)   # ties go to the mildest
 
 
 @dataclass(frozen=True)
@@ -57,8 +57,15 @@ class HardenWindowConfig:
     accels_mps2: tuple[float, ...] = ACCELS_MPS2
     lateral_accels_mps2: tuple[float, ...] = SOLUTION_LATERAL_ACCELS_MPS2
     human_fallback: bool = True       # the human's own drive where no alternative is clear
+    # Which clear alternative demonstrates: "safest" keeps the largest smallest gap to every other
+    # vehicle up to the end of the attack; "mildest" departs least from the attacked drive (the
+    # first clear in `accels_mps2`' order). Mildest taught the first highway round to hold its
+    # speed by threats (fresh CRASH success 16/40 -> 29/40; experiments/README, "Hardening").
+    choice: str = "safest"
 
     def __post_init__(self) -> None:
+        if self.choice not in ("safest", "mildest"):
+            raise InputError(f"choice {self.choice!r} must be safest or mildest")
         for name in ("lookback_s", "stride_s"):
             value = getattr(self, name)
             if not value > 0 or abs(value / WINDOW_DT_S - round(value / WINDOW_DT_S)) > 1e-9:
@@ -121,9 +128,14 @@ def counterfactual_ego(record: SceneRecord, attack: dict, planner, planner_spec:
         return not box_off_road(np.array([*centre, *heading]), (length, width), area)
 
     lane = _lane_width_m(record)
-    found = first_clear_alternative(states, valid, sizes, ego, start, end, dt, config.accels_mps2) or \
-        first_clear_alternative(states, valid, sizes, ego, start, end, dt, config.lateral_accels_mps2,
-                                (lane, -lane), on_road=on_road)
+    if config.choice == "safest":      # along the path or sideways, whichever keeps most room
+        found = safest_clear_alternative(states, valid, sizes, ego, start, end, dt, config.accels_mps2) or \
+            safest_clear_alternative(states, valid, sizes, ego, start, end, dt, config.lateral_accels_mps2,
+                                     (lane, -lane), on_road=on_road)
+    else:
+        found = first_clear_alternative(states, valid, sizes, ego, start, end, dt, config.accels_mps2) or \
+            first_clear_alternative(states, valid, sizes, ego, start, end, dt, config.lateral_accels_mps2,
+                                    (lane, -lane), on_road=on_road)
     info = {"collision_step": int(k_c), "start_step": int(start), "end_step": int(end)}
     if found is not None:
         accel, offset = found

@@ -9,7 +9,7 @@ import pytest
 from adversary.cli import main as adversary_main
 from adversary.crash.judge import box_iou, braking_track, judge, splice_tracks
 from adversary.crash.scenes import AttackScene, record_attack_scene
-from adversary.crash.solution import alternative_track, first_clear_alternative
+from adversary.crash.solution import alternative_track, first_clear_alternative, safest_clear_alternative
 from adversary.harden.dataset import ADVERSARIAL_GROUP, write_attack_shard, write_round_dataset
 from adversary.harden.loop import HardenConfig
 from adversary.harden.windows import hardening_windows
@@ -49,6 +49,23 @@ def test_first_clear_alternative_tries_the_mildest_first():
     assert first_clear_alternative(states, valid, sizes, 1, 0, 60, DT, (0.0, -2.0, -4.0)) == (-2.0, 0.0)
     with pytest.raises(ValueError, match="on_road"):
         first_clear_alternative(states, valid, sizes, 1, 0, 60, DT, (0.0,), (3.5,))
+    # the safest keeps the most room: the hardest braking stops furthest from the car
+    assert safest_clear_alternative(states, valid, sizes, 1, 0, 60, DT, (0.0, -2.0, -4.0)) == (-4.0, 0.0)
+    assert safest_clear_alternative(states, valid, sizes, 1, 0, 60, DT, (0.0, 1.0)) is None
+
+
+def test_the_safest_alternative_weighs_the_car_behind_too():
+    ego = _straight(10.0, 61)
+    ahead = np.tile([40.0, 0.0, 1.0, 0.0, 0.0, 0.0], (61, 1))
+    behind = _straight(10.0, 61) - [12.0, 0, 0, 0, 0, 0]     # follows at 12 m, never brakes
+    states, valid = np.stack([ahead, behind, ego]), np.ones((3, 61), bool)
+    sizes = np.full((3, 2), [5.0, 2.0])
+    # -4 m/s² would be rear-ended by the follower; -2 stops in time ahead but is hit as well:
+    # nothing along the path is clear, a lane change is (on an endless road)
+    assert safest_clear_alternative(states, valid, sizes, 2, 0, 60, DT, (-2.0, -4.0)) is None
+    found = safest_clear_alternative(states, valid, sizes, 2, 0, 60, DT, (0.0, -2.0), (3.5, -3.5),
+                                     on_road=lambda *_: True)
+    assert found is not None and found[1] in (3.5, -3.5)
 
 
 # Episode 9 of highway-v0 seed 0: window row 3 drives ahead of the ego; braking hard in front of
