@@ -42,8 +42,8 @@ HELP = {
     "epochs": "fine-tuning epochs per round",
     "lr": "fine-tuning learning rate",
     "uncertainty_weight": "v of the IRL loss while fine-tuning (default: the checkpoint's)",
-    "demonstration": "which collision-free alternative demonstrates: safest (most room to every vehicle) "
-                     "or mildest (least change from the attacked drive)",
+    "demonstration": "which collision-free alternative demonstrates: safest (most room to every vehicle), "
+                     "defensive (the same, never speeding up) or mildest (least change from the attacked drive)",
     "replan_every": "k: the attack re-runs the planner every k iterations",
     "eval_scenes": "held-out attack scenes: every round's planner is attacked afresh on them",
     "eval_count": "held-out scenes attacked per round",
@@ -68,7 +68,7 @@ def add_parsers(subparsers) -> None:
                                                                      "natural_episodes", "workers",
                                                                      "batch_size", "replan_every",
                                                                      "ade_windows")},
-                       choices={"demonstration": ("safest", "mildest")})
+                       choices={"demonstration": ("safest", "defensive", "mildest")})
     p.add_argument("--natural-commonroad", nargs="+", default=(), metavar="DIR_OR_FILE",
                    help=HELP["natural_commonroad"])
     p.add_argument("--resume", action="store_true", help="go on from the last file written")

@@ -75,8 +75,10 @@ class HardenConfig:
             raise InputError(f"--natural-share {self.natural_share} must be in [0, 1)")
         if self.natural_env and self.natural_commonroad:
             raise InputError("--natural-env and --natural-commonroad: give one of them")
-        if self.demonstration not in ("safest", "mildest"):
-            raise InputError(f"--demonstration {self.demonstration!r} must be safest or mildest")
+        from adversary.harden.windows import DEMONSTRATIONS
+
+        if self.demonstration not in DEMONSTRATIONS:
+            raise InputError(f"--demonstration {self.demonstration!r} must be one of {', '.join(DEMONSTRATIONS)}")
         if not 0 < self.lr < float("inf"):
             raise InputError(f"--lr must be a positive number, got {self.lr}")
 

@@ -45,6 +45,7 @@ from riskmap.sim.metrics import box_off_road
 
 # Accelerations tried along the path, mildest first.
 ACCELS_MPS2 = (0.0, -2.0, 1.0, -4.0, 2.0, -6.0, -8.0)   # ties go to the mildest
+DEMONSTRATIONS = ("safest", "defensive", "mildest")
 
 
 @dataclass(frozen=True)
@@ -58,14 +59,14 @@ class HardenWindowConfig:
     lateral_accels_mps2: tuple[float, ...] = SOLUTION_LATERAL_ACCELS_MPS2
     human_fallback: bool = True       # the human's own drive where no alternative is clear
     # Which clear alternative demonstrates: "safest" keeps the largest smallest gap to every other
-    # vehicle up to the end of the attack; "mildest" departs least from the attacked drive (the
-    # first clear in `accels_mps2`' order). Mildest taught the first highway round to hold its
-    # speed by threats (fresh CRASH success 16/40 -> 29/40; experiments/README, "Hardening").
+    # vehicle up to the end of the attack; "defensive" the same among those that never speed up;
+    # "mildest" departs least from the attacked drive (the first clear in `accels_mps2`' order).
+    # experiments/README, "Hardening", has what each did.
     choice: str = "safest"
 
     def __post_init__(self) -> None:
-        if self.choice not in ("safest", "mildest"):
-            raise InputError(f"choice {self.choice!r} must be safest or mildest")
+        if self.choice not in DEMONSTRATIONS:
+            raise InputError(f"choice {self.choice!r} must be one of {', '.join(DEMONSTRATIONS)}")
         for name in ("lookback_s", "stride_s"):
             value = getattr(self, name)
             if not value > 0 or abs(value / WINDOW_DT_S - round(value / WINDOW_DT_S)) > 1e-9:
@@ -128,10 +129,13 @@ def counterfactual_ego(record: SceneRecord, attack: dict, planner, planner_spec:
         return not box_off_road(np.array([*centre, *heading]), (length, width), area)
 
     lane = _lane_width_m(record)
-    if config.choice == "safest":      # along the path or sideways, whichever keeps most room
-        found = safest_clear_alternative(states, valid, sizes, ego, start, end, dt, config.accels_mps2) or \
-            safest_clear_alternative(states, valid, sizes, ego, start, end, dt, config.lateral_accels_mps2,
-                                     (lane, -lane), on_road=on_road)
+    if config.choice in ("safest", "defensive"):     # whichever keeps most room
+        keep = (lambda a: a <= 0.0) if config.choice == "defensive" else (lambda a: True)
+        along = tuple(a for a in config.accels_mps2 if keep(a))
+        sideways = tuple(a for a in config.lateral_accels_mps2 if keep(a))
+        found = safest_clear_alternative(states, valid, sizes, ego, start, end, dt, along) or \
+            safest_clear_alternative(states, valid, sizes, ego, start, end, dt, sideways, (lane, -lane),
+                                     on_road=on_road)
     else:
         found = first_clear_alternative(states, valid, sizes, ego, start, end, dt, config.accels_mps2) or \
             first_clear_alternative(states, valid, sizes, ego, start, end, dt, config.lateral_accels_mps2,
