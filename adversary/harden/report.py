@@ -8,10 +8,13 @@ import html
 import json
 from pathlib import Path
 
+import numpy as np
+
 from rasterize.errors import InputError
 from riskmap.infra.atomic import atomic_write
 from riskmap.infra.stats import wilson
 
+PANEL_CANDIDATES = 80      # attack windows searched for the before/after panel
 COLUMNS = ("round", "fresh CRASH on held-out scenes [95% CI]", "training attacks won", "attack windows",
            "natural collisions", "natural progress (m)", "open-loop ADE (m)")
 
@@ -54,15 +57,27 @@ def before_after(run: Path, rounds: list[dict]) -> list[tuple[str, Path]]:
     adversarial = [i for i in range(len(dataset)) if dataset.group_of(i) == "adversarial"]
     if not adversarial:
         return []
-    window = adversarial[len(adversarial) // 2]
+    # The window where the original plans furthest beyond the demonstrated alternative (it
+    # would have driven on where the demonstration gives way): where hardening should show.
+    original = RiskMapPlanner.load(Path(settings["checkpoint"]), seed=0)
+    picks = [adversarial[int(k)] for k in np.unique(np.linspace(0, len(adversarial) - 1,
+                                                                 min(PANEL_CANDIDATES, len(adversarial))).astype(int))]
+
+    def overshoot_m(i: int) -> float:
+        scene = dataset.scene(i)
+        demo = float(np.linalg.norm(scene.ego_future_xy()[-1] - scene.ego_state()[:2]))
+        return float(np.linalg.norm(original.plan(scene).waypoints[-1])) - demo
+
+    window = max(picks, key=overshoot_m)
     scene = dataset.scene(window)
     out = []
     for r, checkpoint in ((0, Path(settings["checkpoint"])), (last, round_dir(run, last) / "planner")):
-        planner = RiskMapPlanner.load(checkpoint, seed=0)
+        planner = original if r == 0 else RiskMapPlanner.load(checkpoint, seed=0)
         plan = planner.plan(scene)
         path = run / "report" / f"before_after_round_{r}.png"
         save_plan_panels(scene, plan, planner.raster, planner.grid, path,
-                         f"round {r} planner on an attacked window (demonstration: the collision-free alternative)")
+                         f"round {r} planner on attack window {window} of round 1 (demonstration: the "
+                         "collision-free alternative)")
         out.append((f"round {r}", path))
     return out
 
