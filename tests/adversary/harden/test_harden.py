@@ -144,6 +144,37 @@ def test_round_data_mixes_attack_and_natural_windows_and_keeps_the_original_vali
                             natural_share=0.5, seed=0)
 
 
+@pytest.mark.slow
+def test_report_shows_rounds_and_the_same_window_before_and_after(rear_ended, tmp_path):
+    import shutil
+
+    from adversary.harden.report import write_report
+    from riskmap.data.collect import CollectConfig, collect
+
+    record, attack = rear_ended
+    natural = tmp_path / "natural"
+    collect(CollectConfig("highway-v0", episodes=2, seed=11), natural, progress=False)
+    made = hardening_windows(record, attack, cached_planner("replay"), "replay")
+    run = tmp_path / "run"
+    write_attack_shard(run / "round_1" / "windows" / "scene_00009", made.scenes, made.info)
+    write_round_dataset(run / "round_1" / "data", natural, {"train": {"val_fraction": 0.15}, "dataset": {}},
+                        [run / "round_1" / "windows" / "scene_00009"], natural_share=0.5, seed=0)
+    for suffix in (".safetensors", ".json"):
+        shutil.copyfile(f"checkpoints/riskmap_highway{suffix}", run / "round_1" / f"planner{suffix}")
+    fresh = {"collisions": 3, "scenes": 10}
+    rounds = [{"round": 0, "judged": {"attack": fresh, "closed_loop": {"collisions": 0, "episodes": 4,
+                                                                      "distance_m": 400.0}}},
+              {"round": 1, "training_attack": {"collisions": 1, "scenes": 2}, "data": {"attack_windows": 9},
+               "judged": {"attack": {"collisions": 2, "scenes": 10}, "open_loop": {"ade_m": {"mean": 3.2}}}}]
+    (run / "rounds.json").write_text(json.dumps({"rounds": rounds}))
+    (run / "harden.json").write_text(json.dumps({"checkpoint": "checkpoints/riskmap_highway"}))
+    page = write_report(run).read_text()
+    assert "3/10 (30% [11–60])" in page and "2/10 (20%" in page and "3.20" in page
+    for r in (0, 1):
+        assert (run / "report" / f"before_after_round_{r}.png").stat().st_size > 10_000
+        assert f"before_after_round_{r}.png" in page
+
+
 def test_bad_settings_are_one_line_errors(tmp_path, capsys):
     with pytest.raises(InputError, match="natural-share"):
         HardenConfig("c", "s", "n", "o", natural_share=1.0)
