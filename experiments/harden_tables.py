@@ -5,7 +5,8 @@ search at equal budget, before and after.
         --search original=out/harden_search/original --search hardened=out/harden_search/hardened
 
 `--run FAMILY=DIR`: an `adversary harden --out` directory (its rounds.json and report PNGs);
-`--search LABEL=DIR`: a directory holding `adversary search --out` runs (one per template).
+`--search LABEL=DIR`: a directory holding `adversary search --out` runs (one per template);
+`--attack LABEL=DIR`: an `adversary attack --out` run (a fresh attack on more held-out scenes).
 Writes experiments/results/harden/results.json and tables.md (95% Wilson intervals) and copies
 each run's before/after panels next to them.
 """
@@ -51,11 +52,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--run", action="append", default=[], help="FAMILY=DIR of an adversary harden run")
     parser.add_argument("--search", action="append", default=[], help="LABEL=DIR of adversary search runs")
+    parser.add_argument("--attack", action="append", default=[], help="LABEL=DIR of an adversary attack run")
     parser.add_argument("--out", default=str(ROOT / "experiments/results/harden"))
     args = parser.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    results: dict = {"runs": {}, "search": []}
+    results: dict = {"runs": {}, "search": [], "attacks": {}}
     lines = []
     for family, run in _pairs(args.run, "--run").items():
         rounds = json.loads((run / "rounds.json").read_text())["rounds"]
@@ -68,6 +70,18 @@ def main(argv: list[str] | None = None) -> int:
         lines.append("")
         for png in sorted((run / "report").glob("before_after_round_*.png")):
             shutil.copyfile(png, out / f"{family}_{png.name}")
+    attacks = _pairs(args.attack, "--attack")
+    if attacks:
+        lines += ["### Fresh CRASH (MAM+ASM) on more held-out scenes", "",
+                  "| planner | collisions / scenes (95% CI) |", "|---|---|"]
+    for label, root in attacks.items():
+        s = json.loads((root / "summary.json").read_text())
+        results["attacks"][label] = {k: s[k] for k in ("planner", "scenes", "count")} | {"summary": s["summary"]}
+        lo, hi = s["summary"]["collision_ci95"]
+        lines.append(f"| {label} (`{s['planner']}`) | {s['summary']['collisions']}/{s['summary']['scenes']} "
+                     f"({100 * s['summary']['collision_rate']:.0f}% [{100 * lo:.0f}–{100 * hi:.0f}]) |")
+    if attacks:
+        lines.append("")
     for label, root in _pairs(args.search, "--search").items():
         results["search"] += search_rows(label, root)
     if results["search"]:
