@@ -43,7 +43,8 @@ HELP = {
     "lr": "fine-tuning learning rate",
     "uncertainty_weight": "v of the IRL loss while fine-tuning (default: the checkpoint's)",
     "demonstration": "which collision-free alternative demonstrates: safest (most room to every vehicle), "
-                     "defensive (the same, never speeding up) or mildest (least change from the attacked drive)",
+                     "defensive (the same, never speeding up), lateral (the safest lane change where one is "
+                     "clear) or mildest (least change from the attacked drive)",
     "replan_every": "k: the attack re-runs the planner every k iterations",
     "eval_scenes": "held-out attack scenes: every round's planner is attacked afresh on them",
     "eval_count": "held-out scenes attacked per round",
@@ -61,6 +62,7 @@ HELP = {
 
 def add_parsers(subparsers) -> None:
     from adversary.harden.loop import HardenConfig
+    from adversary.harden.windows import DEMONSTRATIONS
 
     p = subparsers.add_parser("harden", help="fine-tune a risk-map planner on the CRASH attacks that beat it")
     add_config_options(p, HardenConfig, *(name for name in HELP if name != "natural_commonroad"), help=HELP,
@@ -68,7 +70,7 @@ def add_parsers(subparsers) -> None:
                                                                      "natural_episodes", "workers",
                                                                      "batch_size", "replan_every",
                                                                      "ade_windows")},
-                       choices={"demonstration": ("safest", "defensive", "mildest")})
+                       choices={"demonstration": DEMONSTRATIONS})
     p.add_argument("--natural-commonroad", nargs="+", default=(), metavar="DIR_OR_FILE",
                    help=HELP["natural_commonroad"])
     p.add_argument("--resume", action="store_true", help="go on from the last file written")

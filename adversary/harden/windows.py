@@ -45,7 +45,7 @@ from riskmap.sim.metrics import box_off_road
 
 # Accelerations tried along the path, mildest first.
 ACCELS_MPS2 = (0.0, -2.0, 1.0, -4.0, 2.0, -6.0, -8.0)   # ties go to the mildest
-DEMONSTRATIONS = ("safest", "defensive", "mildest")
+DEMONSTRATIONS = ("safest", "defensive", "lateral", "mildest")
 
 
 @dataclass(frozen=True)
@@ -60,6 +60,8 @@ class HardenWindowConfig:
     human_fallback: bool = True       # the human's own drive where no alternative is clear
     # Which clear alternative demonstrates: "safest" keeps the largest smallest gap to every other
     # vehicle up to the end of the attack; "defensive" the same among those that never speed up;
+    # "lateral" the safest lane change where one is clear (a route-goal planner can express a
+    # path beside the threat, hardly one that stops short of its goal), else the safest;
     # "mildest" departs least from the attacked drive (the first clear in `accels_mps2`' order).
     # experiments/README, "Hardening", has what each did.
     choice: str = "safest"
@@ -129,13 +131,19 @@ def counterfactual_ego(record: SceneRecord, attack: dict, planner, planner_spec:
         return not box_off_road(np.array([*centre, *heading]), (length, width), area)
 
     lane = _lane_width_m(record)
-    if config.choice in ("safest", "defensive"):     # whichever keeps most room
+    if config.choice in ("safest", "defensive", "lateral"):     # whichever keeps most room
         keep = (lambda a: a <= 0.0) if config.choice == "defensive" else (lambda a: True)
         along = tuple(a for a in config.accels_mps2 if keep(a))
         sideways = tuple(a for a in config.lateral_accels_mps2 if keep(a))
-        found = safest_clear_alternative(states, valid, sizes, ego, start, end, dt, along) or \
-            safest_clear_alternative(states, valid, sizes, ego, start, end, dt, sideways, (lane, -lane),
-                                     on_road=on_road)
+
+        def along_path():
+            return safest_clear_alternative(states, valid, sizes, ego, start, end, dt, along)
+
+        def to_the_side():
+            return safest_clear_alternative(states, valid, sizes, ego, start, end, dt, sideways, (lane, -lane),
+                                            on_road=on_road)
+
+        found = (to_the_side() or along_path()) if config.choice == "lateral" else (along_path() or to_the_side())
     else:
         found = first_clear_alternative(states, valid, sizes, ego, start, end, dt, config.accels_mps2) or \
             first_clear_alternative(states, valid, sizes, ego, start, end, dt, config.lateral_accels_mps2,

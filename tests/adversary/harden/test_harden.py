@@ -12,7 +12,7 @@ from adversary.crash.scenes import AttackScene, record_attack_scene
 from adversary.crash.solution import alternative_track, first_clear_alternative, safest_clear_alternative
 from adversary.harden.dataset import ADVERSARIAL_GROUP, write_attack_shard, write_round_dataset
 from adversary.harden.loop import HardenConfig
-from adversary.harden.windows import hardening_windows
+from adversary.harden.windows import attacked_drive, hardening_windows
 from rasterize.errors import InputError
 from riskmap.data.dataset import DemoDataset
 from riskmap.registry import cached_planner
@@ -107,6 +107,26 @@ def test_attack_windows_avoid_the_adversary_with_a_full_future(rear_ended):
 
 
 @pytest.mark.slow
+def test_a_lateral_demonstration_changes_lane_where_it_can(rear_ended):
+    from adversary.harden.windows import HardenWindowConfig
+
+    record, attack = rear_ended
+    made = hardening_windows(record, attack, cached_planner("replay"), "replay", HardenWindowConfig(choice="lateral"))
+    info = made.info
+    assert info["demonstration"] == "alternative" and abs(info["offset_m"]) > 3.0
+    # once the lane change has blended in (2 s), the demonstrated ego is a lane width from the
+    # attacked drive's path
+    states, valid, _, others = attacked_drive(record, attack, cached_planner("replay"), "replay")
+    path = states[len(others)][valid[len(others)], :2]
+    late = [i for i, k in enumerate(info["steps"]) if k >= info["start_step"] + 20]
+    assert late
+    window = made.scenes[late[0]]
+    here = window.states[0, window.current_index, :2]
+    dense = np.concatenate([np.linspace(a, b, 20) for a, b in zip(path[:-1], path[1:])])
+    assert np.min(np.linalg.norm(dense - here, axis=1)) == pytest.approx(abs(info["offset_m"]), abs=0.3)
+
+
+@pytest.mark.slow
 def test_no_windows_from_an_attack_without_a_collision(rear_ended):
     record, attack = rear_ended
     made = hardening_windows(record, {**attack, "collision": False}, cached_planner("replay"), "replay")
@@ -180,6 +200,8 @@ def test_bad_settings_are_one_line_errors(tmp_path, capsys):
         HardenConfig("c", "s", "n", "o", natural_share=1.0)
     with pytest.raises(InputError, match="--rounds"):
         HardenConfig("c", "s", "n", "o", rounds=0)
+    with pytest.raises(InputError, match="--demonstration 'boldest'"):
+        HardenConfig("c", "s", "n", "o", demonstration="boldest")
     code = adversary_main(["harden", "--checkpoint", str(tmp_path / "missing"), "--scenes", str(tmp_path),
                            "--natural", str(tmp_path), "--out", str(tmp_path / "run")])
     err = capsys.readouterr().err.strip().splitlines()
