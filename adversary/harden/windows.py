@@ -161,8 +161,17 @@ def counterfactual_ego(record: SceneRecord, attack: dict, planner, planner_spec:
     mine = human.states[human.ego_id, :end + 1]
     if not human.valid[human.ego_id, :end + 1].all():
         return None, {**info, "why": "no alternative is clear and the human left the log"}
-    ahead = alternative_track(human.states, human.valid, human.ego_id, end, extra, dt, 0.0)
-    return np.concatenate([mine, ahead]), {**info, "demonstration": "human", "start_step": 0}
+    return np.concatenate([mine, constant_velocity(mine[-1], extra, dt)]), \
+        {**info, "demonstration": "human", "start_step": 0}
+
+
+def constant_velocity(state: np.ndarray, steps: int, dt_s: float) -> np.ndarray:
+    """States [steps, 6] going on from `state` at its speed and heading (no turning)."""
+    times = dt_s * np.arange(1, steps + 1)
+    out = np.tile(state, (steps, 1))
+    out[:, :2] = state[:2] + (state[4] * times)[:, None] * state[2:4]
+    out[:, 5] = 0.0
+    return out
 
 
 def _first_collision_arrays(states, valid, sizes, ego, others, from_step):

@@ -39,6 +39,16 @@ def test_alternative_track_keeps_the_path_and_blends_the_offset_in():
     np.testing.assert_allclose(shifted[-1, 2:4], [1.0, 0.0], atol=1e-9)   # and straight again after
 
 
+def test_the_human_fallback_goes_on_along_its_own_heading():
+    from adversary.harden.windows import constant_velocity
+
+    heading = np.array([np.cos(2.0), np.sin(2.0)])
+    ahead = constant_velocity(np.array([5.0, 1.0, *heading, 8.0, 0.3]), 10, DT)
+    np.testing.assert_allclose(ahead[-1, :2], [5.0, 1.0] + 8.0 * 1.0 * heading)
+    np.testing.assert_allclose(ahead[:, 2:5], np.tile([*heading, 8.0], (10, 1)))
+    assert (ahead[:, 5] == 0).all()
+
+
 def test_first_clear_alternative_tries_the_mildest_first():
     ego = _straight(10.0, 61)
     stopped = np.tile([40.0, 0.0, 1.0, 0.0, 0.0, 0.0], (61, 1))   # a car standing 40 m ahead
