@@ -6,7 +6,7 @@ Round r (1 ... R) starts from the planner of round r - 1 (round 0: `--checkpoint
     RUN/round_r/windows/    each successful attack as training windows (`adversary.harden.windows`)
     RUN/round_r/data/       those of rounds 1 ... r mixed with natural windows (`adversary.harden.dataset`)
     RUN/round_r/train/      `riskmap train` from round r - 1's weights on that data
-    RUN/round_r/planner.*   its last epoch, with the original's planning settings (the round's planner)
+    RUN/round_r/planner.*   its last epoch, with the original's sampler and planning settings (the round's planner)
 
 and the judgement, on held-out scenes with attacks optimised afresh against every round's planner
 (never replayed from another round's):
@@ -173,13 +173,23 @@ def fine_tune(config: HardenConfig, r: int, shards: list[Path], progress: bool) 
     resume = (here / "train" / "state.pt").exists()
     train(settings, resume=resume, progress=progress)
     last = here / "train" / "last"
-    side = json.loads(last.with_suffix(".json").read_text())
-    side = {**side, "planning": original.get("planning"), "hardening": {"round": r, "from": str(planner_path(config, r - 1)), "data": data}}
-    side = {k: v for k, v in side.items() if v is not None}
+    side = round_sidecar(json.loads(last.with_suffix(".json").read_text()), original,
+                         {"round": r, "from": str(planner_path(config, r - 1)), "data": data})
     shutil.copyfile(last.with_suffix(".safetensors"), here / "planner.safetensors.tmp")
     (here / "planner.safetensors.tmp").replace(here / "planner.safetensors")
     write_json(here / "planner.json", side)
     return {"data": data, "train": side.get("metrics")}
+
+
+def round_sidecar(trained: dict, original: dict, hardening: dict) -> dict:
+    """The round planner's sidecar: the fine-tune's (weights' shapes, training record) with the
+    original's sampler and planning settings, so the round's planner turns a risk map into a
+    drive exactly as the original does and only the weights differ. (A fresh training sidecar
+    names today's default sampler — kinematic timing, gap keeping — while an older original
+    plans uniform without gap keeping: comparing the two would measure the sampler.)"""
+    side = {**trained, "sampler": original.get("sampler", trained.get("sampler")),
+            "planning": original.get("planning"), "hardening": hardening}
+    return {k: v for k, v in side.items() if v is not None}
 
 
 def natural_metrics(config: HardenConfig, r: int, out: Path, progress: bool) -> dict:

@@ -1,5 +1,6 @@
 """The hardening loop's parts: collision-free alternatives, attack windows, the mixed data, the CLI."""
 
+import itertools
 import json
 import math
 
@@ -11,7 +12,7 @@ from adversary.crash.judge import box_iou, braking_track, judge, splice_tracks
 from adversary.crash.scenes import AttackScene, record_attack_scene
 from adversary.crash.solution import alternative_track, first_clear_alternative, safest_clear_alternative
 from adversary.harden.dataset import ADVERSARIAL_GROUP, write_attack_shard, write_round_dataset
-from adversary.harden.loop import HardenConfig
+from adversary.harden.loop import HardenConfig, round_sidecar
 from adversary.harden.windows import attacked_drive, hardening_windows
 from rasterize.errors import InputError
 from riskmap.data.dataset import DemoDataset
@@ -132,7 +133,7 @@ def test_a_lateral_demonstration_changes_lane_where_it_can(rear_ended):
     assert late
     window = made.scenes[late[0]]
     here = window.states[0, window.current_index, :2]
-    dense = np.concatenate([np.linspace(a, b, 20) for a, b in zip(path[:-1], path[1:])])
+    dense = np.concatenate([np.linspace(a, b, 20) for a, b in itertools.pairwise(path)])
     assert np.min(np.linalg.norm(dense - here, axis=1)) == pytest.approx(abs(info["offset_m"]), abs=0.3)
 
 
@@ -203,6 +204,22 @@ def test_report_shows_rounds_and_the_same_window_before_and_after(rear_ended, tm
     for r in (0, 1):
         assert (run / "report" / f"before_after_round_{r}.png").stat().st_size > 10_000
         assert f"before_after_round_{r}.png" in page
+
+
+def test_the_round_planner_samples_and_plans_as_the_original():
+    """Only the weights may differ between a round's planner and the one it came from: an original
+    from before kinematic timing and gap keeping must not gain them from the fine-tune's sidecar."""
+    from riskmap.planner.riskmap_planner import sampler_of
+    from riskmap.planner.sampler import SamplerConfig
+
+    original = {"sampler": {"samples": 1000, "clusters": 10, "waypoints": 12}, "planning": {"goal_variance": 2.0},
+                "irl": {"goal_variance": 5.0}}
+    trained = {"sampler": {**SamplerConfig().__dict__}, "irl": {"goal_variance": 5.0}, "epoch": 2}
+    assert sampler_of(trained) != sampler_of(original)          # the case the rule is for
+    side = round_sidecar(trained, original, {"round": 1})
+    assert sampler_of(side) == sampler_of(original)
+    assert sampler_of(side).timing == "uniform" and not sampler_of(side).keep_gap
+    assert side["planning"] == {"goal_variance": 2.0} and side["epoch"] == 2 and side["hardening"] == {"round": 1}
 
 
 def test_bad_settings_are_one_line_errors(tmp_path, capsys):
