@@ -95,6 +95,17 @@ def rear_ended():
     return record, attack
 
 
+@pytest.fixture(scope="module")
+def natural_and_windows(rear_ended, tmp_path_factory):
+    """(natural highway dataset of 4 episodes, the rear-ended attack's windows): what a round mixes."""
+    from riskmap.data.collect import CollectConfig, collect
+
+    record, attack = rear_ended
+    natural = tmp_path_factory.mktemp("harden") / "natural"
+    collect(CollectConfig("highway-v0", episodes=4, seed=11), natural, progress=False)
+    return natural, hardening_windows(record, attack, cached_planner("replay"), "replay")
+
+
 @pytest.mark.slow
 def test_attack_windows_avoid_the_adversary_with_a_full_future(rear_ended):
     record, attack = rear_ended
@@ -145,13 +156,9 @@ def test_no_windows_from_an_attack_without_a_collision(rear_ended):
 
 
 @pytest.mark.slow
-def test_round_data_mixes_attack_and_natural_windows_and_keeps_the_original_validation(rear_ended, tmp_path):
-    from riskmap.data.collect import CollectConfig, collect
-
-    record, attack = rear_ended
-    natural = tmp_path / "natural"
-    collect(CollectConfig("highway-v0", episodes=4, seed=11), natural, progress=False)
-    made = hardening_windows(record, attack, cached_planner("replay"), "replay")
+def test_round_data_mixes_attack_and_natural_windows_and_keeps_the_original_validation(natural_and_windows,
+                                                                                        tmp_path):
+    natural, made = natural_and_windows
     write_attack_shard(tmp_path / "windows" / "scene_00009", made.scenes, made.info)
     write_attack_shard(tmp_path / "windows" / "scene_00010", (), {"windows": 0, "why": "no collision"})
     sidecar = {"train": {"val_fraction": 0.15}, "dataset": {}}
@@ -176,16 +183,12 @@ def test_round_data_mixes_attack_and_natural_windows_and_keeps_the_original_vali
 
 
 @pytest.mark.slow
-def test_report_shows_rounds_and_the_same_window_before_and_after(rear_ended, tmp_path):
+def test_report_shows_rounds_and_the_same_window_before_and_after(natural_and_windows, tmp_path):
     import shutil
 
     from adversary.harden.report import write_report
-    from riskmap.data.collect import CollectConfig, collect
 
-    record, attack = rear_ended
-    natural = tmp_path / "natural"
-    collect(CollectConfig("highway-v0", episodes=2, seed=11), natural, progress=False)
-    made = hardening_windows(record, attack, cached_planner("replay"), "replay")
+    natural, made = natural_and_windows
     run = tmp_path / "run"
     write_attack_shard(run / "round_1" / "windows" / "scene_00009", made.scenes, made.info)
     write_round_dataset(run / "round_1" / "data", natural, {"train": {"val_fraction": 0.15}, "dataset": {}},
