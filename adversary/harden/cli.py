@@ -42,6 +42,9 @@ HELP = {
     "epochs": "fine-tuning epochs per round",
     "lr": "fine-tuning learning rate",
     "uncertainty_weight": "v of the IRL loss while fine-tuning (default: the checkpoint's)",
+    "risk_goal_threshold": "fine-tune (and plan) with the risk-limited goal: the goal is held short on the route "
+                           "where the model's risk map falls below this reward (riskmap.planner.risk_goal); "
+                           "default: the route rule's goal",
     "demonstration": "which collision-free alternative demonstrates: safest (most room to every vehicle), "
                      "defensive (the same, never speeding up), lateral (the safest lane change where one is "
                      "clear) or mildest (least change from the attacked drive)",

@@ -50,6 +50,7 @@ class HardenConfig:
     epochs: int = 3                  # fine-tuning epochs per round
     lr: float = 1e-4
     uncertainty_weight: float | None = None   # v of the IRL loss; None: the checkpoint's
+    risk_goal_threshold: float | None = None   # TrainConfig.risk_goal_threshold of the fine-tunes; None: none
     demonstration: str = "safest"    # which collision-free alternative demonstrates (HardenWindowConfig.choice)
     replan_every: int = 50           # k of the attack (a risk-map rollout costs ~8 IDM ones)
     seed: int = 0
@@ -169,7 +170,8 @@ def fine_tune(config: HardenConfig, r: int, shards: list[Path], progress: bool) 
         sigma_x=trained["sigma_x"], sigma_y=trained["sigma_y"], goal_variance=original["irl"]["goal_variance"],
         goal=trained.get("goal", "route"), epochs=config.epochs, batch_size=trained["batch_size"], lr=config.lr,
         horizon=trained["horizon"], val_groups=tuple(data["validation_groups"]), seed=config.seed + r,
-        init_checkpoint=str(planner_path(config, r - 1)), predict_s=trained.get("predict_s"))
+        init_checkpoint=str(planner_path(config, r - 1)), predict_s=trained.get("predict_s"),
+        risk_goal_threshold=config.risk_goal_threshold)
     resume = (here / "train" / "state.pt").exists()
     train(settings, resume=resume, progress=progress)
     last = here / "train" / "last"

@@ -12,6 +12,8 @@ A sample (grid G = resolution, C = raster channels):
                                         the demonstration's last in-grid cell (goal="demo")
     start_cell   int64   [2]            the ego's (row, col)
     demo_path    int64   [3G, 2]        the demonstration's cell path, padded with -1
+    route_cells  int64   [256, 2]       cells of the route every metre from the ego, padded with -1
+                                        (the risk-limited goal: `riskmap.planner.risk_goal`)
     future       float32 [F, 2]         the ego's future waypoints, ego frame, metres
 """
 
@@ -40,6 +42,7 @@ from rasterize.raster import rasterize_scene
 from rasterize.scene import Scene
 from rasterize.scene_io import check_packed, unpack_scene
 from riskmap.data.collect import FORMAT_VERSION, INDEX, MANIFEST
+from riskmap.planner.risk_goal import route_cells
 from riskmap.infra.atomic import read_npz
 
 try:  # torch is optional for reading scenes, required for DataLoader use
@@ -195,6 +198,7 @@ class DemoDataset(_TorchDataset):
             "goal_cell": np.array(goal_cell, dtype=np.int64),
             "start_cell": np.array(start_cell(self.grid), dtype=np.int64),
             "demo_path": path,
+            "route_cells": route_cells(scene, self.grid),
             "future": ego_from_world(scene.ego_future_xy(), origin, heading).astype(np.float32),
         }
         return sample

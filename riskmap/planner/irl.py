@@ -24,17 +24,39 @@ class IRLConfig:
     gamma: float = 1.0
     uncertainty_weight: float = 1.0   # v
     goal_variance: float = 5.0        # cells², of the goal map
+    # The risk-limited goal (riskmap.planner.risk_goal.RiskGoalConfig's fields), None: the route
+    # rule's goal as given. With it each window's goal is held short where the model's own
+    # (detached) risk map blocks the route, as the planner does in closed loop.
+    risk_goal: dict | None = None
 
 
-def goal_log_map(goal_cells: torch.Tensor, rows: int, cols: int, variance: float,
+def goal_log_map(goal_cells: torch.Tensor, rows: int, cols: int, variance: float | torch.Tensor,
                  dtype: torch.dtype = torch.float32) -> torch.Tensor:
-    """log of the Gaussian goal map [B, rows, cols]: −d²/(2·variance), d in cells. Exact far out,
-    where the goal map itself underflows."""
+    """log of the Gaussian goal map [B, rows, cols]: −d²/(2·variance), d in cells; `variance` one
+    number or one per sample [B]. Exact far out, where the goal map itself underflows."""
     r = torch.arange(rows, dtype=dtype).view(1, rows, 1)
     c = torch.arange(cols, dtype=dtype).view(1, 1, cols)
     gr = goal_cells[:, 0].to(dtype).view(-1, 1, 1)
     gc = goal_cells[:, 1].to(dtype).view(-1, 1, 1)
+    if isinstance(variance, torch.Tensor):
+        variance = variance.to(dtype).view(-1, 1, 1)
     return -((r - gr) ** 2 + (c - gc) ** 2) / (2.0 * variance)
+
+
+def goal_cells(risk: torch.Tensor, batch: dict, config: IRLConfig
+               ) -> tuple[torch.Tensor, float | torch.Tensor]:
+    """The goal value iteration is pulled to: ([B, 2] cells, variance in cells²): the batch's
+    cells (the route rule's) and `config.goal_variance`, or with `config.risk_goal` those the risk
+    map holds back, with their own variance, per sample (`riskmap.planner.risk_goal`)."""
+    if config.risk_goal is None:
+        return batch["goal_cell"], config.goal_variance
+    from riskmap.planner.risk_goal import RiskGoalConfig, risk_goal_cells
+
+    cells, variance = risk_goal_cells(risk.detach().cpu().numpy(), batch["route_cells"].cpu().numpy(),
+                                      batch["motion"][:, 0, 0, 0].cpu().numpy(), batch["goal_cell"].cpu().numpy(),
+                                      config.goal_variance, RiskGoalConfig(**config.risk_goal))
+    device = batch["goal_cell"].device
+    return torch.from_numpy(cells).to(device), torch.from_numpy(variance).to(device)
 
 
 @dataclass
@@ -50,7 +72,8 @@ class IRLStep:
 
 def irl_step(risk: torch.Tensor, batch: dict, config: IRLConfig) -> IRLStep:
     b, g_rows, g_cols = risk.shape
-    goal = goal_log_map(batch["goal_cell"], g_rows, g_cols, config.goal_variance, risk.dtype)
+    cells, variance = goal_cells(risk, batch, config)
+    goal = goal_log_map(cells, g_rows, g_cols, variance, risk.dtype)
     with torch.no_grad():
         _, policy = soft_value_iteration(risk.detach(), goal.to(risk.device), config.horizon,
                                          config.gamma)

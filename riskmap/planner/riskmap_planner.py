@@ -16,6 +16,7 @@ from rasterize.scene import Scene
 from riskmap.infra.checkpoint import route_settings_of
 from riskmap.planner.gap_keeping import keep_gap
 from riskmap.planner.irl import goal_log_map
+from riskmap.planner.risk_goal import RiskGoalConfig, risk_goal_cell, route_cells
 from riskmap.planner.sampler import SamplerConfig, sample_trajectory
 from riskmap.planner.vi import soft_value_iteration, state_visitation
 from riskmap.sim.plan import Plan
@@ -33,11 +34,21 @@ def sampler_of(side: dict) -> SamplerConfig:
     return SamplerConfig(**settings)
 
 
+def risk_goal_of(side: dict) -> RiskGoalConfig | None:
+    """The checkpoint's risk-limited goal (`riskmap.planner.risk_goal`): the sidecar's
+    `planning.risk_goal` settings, else its training's `irl.risk_goal`; None (the route rule's
+    goal alone, as every checkpoint before it) where neither names one."""
+    settings = side.get("planning", {}).get("risk_goal", side.get("irl", {}).get("risk_goal"))
+    return None if settings is None else RiskGoalConfig(**settings)
+
+
 class RiskMapPlanner:
     """BEV raster → risk map → soft value iteration → SVF → sampled 12-waypoint trajectory.
 
     The goal is the route rule's (`rasterize.highway.RouteRule`): the last point of the ego's
-    route ahead inside the grid, the same rule that built the training goal maps.
+    route ahead inside the grid, the same rule that built the training goal maps; with
+    `risk_goal` set, held short of the first point of the route the risk map blocks
+    (`riskmap.planner.risk_goal`).
     """
 
     def __init__(self, model: torch.nn.Module, raster: RasterConfig, grid: GridConfig,
@@ -50,6 +61,7 @@ class RiskMapPlanner:
         self.horizon, self.goal_variance, self.gamma = horizon, goal_variance, gamma
         self.sampler, self.seed = sampler, seed
         self.route_settings: dict | None = None   # route rule of recorded training data, if any
+        self.risk_goal: RiskGoalConfig | None = None  # see risk_goal_of
         self._calls = 0
 
     @classmethod
@@ -77,6 +89,7 @@ class RiskMapPlanner:
                       side["irl"]["horizon"], variance, side["irl"]["gamma"],
                       sampler_of(side), seed)
         planner.route_settings = route_settings_of(side)
+        planner.risk_goal = risk_goal_of(side)
         return planner
 
     def reset(self, scene: Scene) -> None:
@@ -98,15 +111,20 @@ class RiskMapPlanner:
                               torch.from_numpy(motion)[None])
             t["network"] = time.perf_counter() - t0
             t0 = time.perf_counter()
-            g = goal_log_map(torch.tensor([goal_cell]), self.grid.rows, self.grid.cols,
-                             self.goal_variance)
+            goal_xy, variance = route_goal_point(scene, self.grid), self.goal_variance
+            if self.risk_goal is not None:
+                limited = risk_goal_cell(risk[0].numpy(), route_cells(scene, self.grid),
+                                         float(scene.ego_state()[4]), self.risk_goal)
+                if limited is not None:        # the path ends at the held-back cell's centre
+                    goal_cell, goal_xy, variance = limited, None, self.risk_goal.goal_variance
+            g = goal_log_map(torch.tensor([goal_cell]), self.grid.rows, self.grid.cols, variance)
             _, policy = soft_value_iteration(risk, g, self.horizon, self.gamma)
             t["vi"] = time.perf_counter() - t0
         t0 = time.perf_counter()
         waypoints = sample_trajectory(policy[0], start, self.horizon, self.grid, self.sampler,
                                       seed=(self.seed * 1_000_003 + self._calls) % 2**32,  # any planner seed
                                       speed_mps=float(scene.states[scene.ego_index, scene.current_index, 4]),
-                                      goal_xy=route_goal_point(scene, self.grid))
+                                      goal_xy=goal_xy)
         if self.sampler.keep_gap:
             waypoints = keep_gap(waypoints, scene, self.sampler.dt_s,
                                  prediction=self.sampler.gap_prediction)
@@ -118,5 +136,5 @@ class RiskMapPlanner:
         def svf() -> np.ndarray:          # only figures and open-loop metrics read it
             return state_visitation(policy, torch.tensor([start]), horizon)[0][0].numpy()
 
-        return Plan(waypoints, risk[0].numpy(), goal_map(goal_cell, self.grid, self.goal_variance),
+        return Plan(waypoints, risk[0].numpy(), goal_map(goal_cell, self.grid, variance),
                     policy[0].numpy(), svf, goal_cell, t)

@@ -60,6 +60,10 @@ class TrainConfig:
     # Seconds of predicted future drawn in the raster (RasterConfig.predict_s); None: as the
     # dataset was collected.
     predict_s: float | None = None
+    # Reward below which the model's own risk map holds a window's goal short on the route
+    # (riskmap.planner.risk_goal, the other settings its defaults); None: the route rule's goal.
+    # The planner then plans with the same rule.
+    risk_goal_threshold: float | None = None
     # How samples are made; neither changes what is computed (a resume may change them):
     workers: int | None = None          # sample processes; None: 0 on the CPU, else up to 4
     cache: str = "auto"                 # sample cache folder; auto: DATA/cache, else OUT/cache; off
@@ -79,6 +83,8 @@ class TrainConfig:
             if not 0 < getattr(self, name) < math.inf:
                 raise InputError(f"--{name.replace('_', '-')} must be a positive number, got "
                                  f"{getattr(self, name)}")
+        if self.risk_goal_threshold is not None and not math.isfinite(self.risk_goal_threshold):
+            raise InputError(f"--risk-goal-threshold must be a finite reward, got {self.risk_goal_threshold}")
         if not math.isfinite(self.uncertainty_weight) or self.uncertainty_weight < 0:
             raise InputError(f"--uncertainty-weight must be a finite number >= 0, got "
                              f"{self.uncertainty_weight}")
@@ -96,7 +102,14 @@ class TrainConfig:
         it resolved (`riskmap.training.train.resolve_goal_variance`)."""
         from riskmap.planner.irl import IRLConfig
 
-        return IRLConfig(self.horizon, self.gamma, self.uncertainty_weight, goal_variance)
+        from dataclasses import asdict
+
+        from riskmap.planner.risk_goal import RiskGoalConfig
+
+        risk_goal = None
+        if self.risk_goal_threshold is not None:
+            risk_goal = asdict(RiskGoalConfig(threshold=self.risk_goal_threshold))
+        return IRLConfig(self.horizon, self.gamma, self.uncertainty_weight, goal_variance, risk_goal)
 
 
 @dataclass(frozen=True)
