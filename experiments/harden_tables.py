@@ -6,7 +6,12 @@ search at equal budget, before and after.
 
 `--run FAMILY=DIR`: an `adversary harden --out` directory (its rounds.json and report PNGs);
 `--search LABEL=DIR`: a directory holding `adversary search --out` runs (one per template);
-`--attack LABEL=DIR`: an `adversary attack --out` run (a fresh attack on more held-out scenes).
+`--attack LABEL=DIR`: an `adversary attack --out` run (a fresh attack on more held-out scenes);
+`--natural LABEL=DIR`: a `riskmap evaluate --out` run of one planner (natural traffic, closed
+loop), and `--ade LABEL=FILE` an open-loop ADE record (`riskmap.evaluation.open_loop.evaluate`'s,
+as a hardening round writes it: `ade.json`), both shown beside the attack of the same label;
+`--paired A:B`: the two attacks' outcomes paired
+on their common scenes, with a two-sided sign test.
 Writes experiments/results/harden/results.json and tables.md (95% Wilson intervals) and copies
 each run's before/after panels next to them.
 """
@@ -20,7 +25,7 @@ from pathlib import Path
 
 from adversary.harden.report import COLUMNS, round_row
 from riskmap.infra.atomic import atomic_write, write_json
-from riskmap.infra.stats import wilson
+from riskmap.infra.stats import sign_test, wilson
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -48,11 +53,30 @@ def search_rows(label: str, root: Path) -> list[dict]:
     return rows
 
 
+def outcomes(attack_run: Path) -> dict[str, bool]:
+    """Scene name → whether the attack collided, for every scene an `adversary attack` run judged."""
+    return {path.stem: bool(json.loads(path.read_text())["collision"])
+            for path in sorted((attack_run / "attacks").glob("scene_*.json"))}
+
+
+def paired(a: Path, b: Path) -> dict:
+    """Two attack runs on their common scenes: counts won against one planner only, and the
+    two-sided sign test over the scenes that differ."""
+    x, y = outcomes(a), outcomes(b)
+    common = sorted(set(x) & set(y))
+    a_only = sum(x[s] and not y[s] for s in common)
+    b_only = sum(y[s] and not x[s] for s in common)
+    return {"scenes": len(common), "a_only": a_only, "b_only": b_only, "p": sign_test(a_only, b_only)}
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--run", action="append", default=[], help="FAMILY=DIR of an adversary harden run")
     parser.add_argument("--search", action="append", default=[], help="LABEL=DIR of adversary search runs")
     parser.add_argument("--attack", action="append", default=[], help="LABEL=DIR of an adversary attack run")
+    parser.add_argument("--natural", action="append", default=[], help="LABEL=DIR of a riskmap evaluate run")
+    parser.add_argument("--ade", action="append", default=[], help="LABEL=FILE of an open-loop ADE record")
+    parser.add_argument("--paired", action="append", default=[], help="A:B, two --attack labels")
     parser.add_argument("--out", default=str(ROOT / "experiments/results/harden"))
     args = parser.parse_args(argv)
     out = Path(args.out)
@@ -71,16 +95,48 @@ def main(argv: list[str] | None = None) -> int:
         for png in sorted((run / "report").glob("before_after_round_*.png")):
             shutil.copyfile(png, out / f"{family}_{png.name}")
     attacks = _pairs(args.attack, "--attack")
+    natural = _pairs(args.natural, "--natural")
+    ade = _pairs(args.ade, "--ade")
     if attacks:
-        lines += ["### Fresh CRASH (MAM+ASM) on more held-out scenes", "",
-                  "| planner | collisions / scenes (95% CI) |", "|---|---|"]
+        lines += ["### Fresh CRASH (MAM+ASM) on held-out scenes", "",
+                  ("| planner | collisions / scenes (95% CI) | natural: collisions / episodes | progress (m) "
+                   "| open-loop ADE (m) |"), "|---|---|---|---|---|"]
     for label, root in attacks.items():
         s = json.loads((root / "summary.json").read_text())
         results["attacks"][label] = {k: s[k] for k in ("planner", "scenes", "count")} | {"summary": s["summary"]}
         lo, hi = s["summary"]["collision_ci95"]
-        lines.append(f"| {label} (`{s['planner']}`) | {s['summary']['collisions']}/{s['summary']['scenes']} "
-                     f"({100 * s['summary']['collision_rate']:.0f}% [{100 * lo:.0f}–{100 * hi:.0f}]) |")
+        row = (f"| {label} (`{s['planner']}`) | {s['summary']['collisions']}/{s['summary']['scenes']} "
+               f"({100 * s['summary']['collision_rate']:.0f}% [{100 * lo:.0f}–{100 * hi:.0f}]) |")
+        if label in natural:
+            planners = json.loads((natural[label] / "results.json").read_text())["planners"]
+            table = planners.get(s["planner"]) or next(iter(planners.values()))   # the attacked planner's row
+            collisions = round(table["collided_rate"] * table["episodes"])
+            results["attacks"][label]["natural"] = {"episodes": table["episodes"], "collisions": collisions,
+                                                    "distance_m": table["distance_m"]["mean"]}
+            row += f" {collisions}/{table['episodes']} | {table['distance_m']['mean']:.1f} |"
+        else:
+            row += " – | – |"
+        if label in ade:
+            value = json.loads(ade[label].read_text())["ade_m"]["mean"]
+            results["attacks"][label]["open_loop_ade_m"] = value
+            row += f" {value:.2f} |"
+        else:
+            row += " – |"
+        lines.append(row)
     if attacks:
+        lines.append("")
+    pairs = [pair.split(":") for pair in args.paired]
+    if pairs:
+        lines += ["| paired: A → B | common scenes | won against A only | won against B only | sign test p |",
+                  "|---|---|---|---|---|"]
+    results["paired"] = []
+    for pair in pairs:
+        if len(pair) != 2 or any(label not in attacks for label in pair):
+            raise SystemExit(f"--paired {':'.join(pair)!r}: write A:B with two --attack labels")
+        row = paired(attacks[pair[0]], attacks[pair[1]])
+        results["paired"].append({"a": pair[0], "b": pair[1], **row})
+        lines.append(f"| {pair[0]} → {pair[1]} | {row['scenes']} | {row['a_only']} | {row['b_only']} | {row['p']:.3f} |")
+    if pairs:
         lines.append("")
     for label, root in _pairs(args.search, "--search").items():
         results["search"] += search_rows(label, root)

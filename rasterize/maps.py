@@ -11,13 +11,25 @@ import numpy as np
 from rasterize.config import GridConfig
 from rasterize.errors import InputError
 from rasterize.frames import (
-    cell_centres_ego, ego_from_grid, ego_from_world, ego_pose, grid_from_ego, heading_angle, in_grid,
+    cell_centres_ego,
+    ego_from_grid,
+    ego_from_world,
+    ego_pose,
+    grid_from_ego,
+    heading_angle,
+    in_grid,
 )
 from rasterize.scene import Scene
 
 # Sub-samples per cell side when averaging a Gaussian over a cell: highway cells are 4.8 m long,
 # longer than the 1.5 m sigma, so a value at the cell centre alone could miss an agent entirely.
 _SUBSAMPLES = 5
+
+
+# The route is checked at points this far apart (m), in training and in closed loop alike; a
+# sample holds at most ROUTE_POINTS of them (256 m: more than any grid's reach ahead).
+ROUTE_STEP_M = 1.0
+ROUTE_POINTS = 256
 
 
 def _subcell_offsets(grid: GridConfig) -> np.ndarray:
@@ -160,6 +172,26 @@ def route_goal_cell(scene: Scene, grid: GridConfig) -> tuple[int, int]:
         return start_cell(grid)
     r, c = cells[inside[-1]]
     return int(r), int(c)
+
+
+def route_cells(scene: Scene, grid: GridConfig) -> np.ndarray:
+    """[ROUTE_POINTS, 2] cells (row, col) of points every ROUTE_STEP_M along the ego's route, from
+    the ego (distance 0) to its last point inside the grid, padded with −1 (all −1 without a
+    route or with none of it inside)."""
+    out = np.full((ROUTE_POINTS, 2), -1, dtype=np.int64)
+    if scene.route_xy is None:
+        return out
+    origin, heading = ego_pose(scene)
+    points = ego_from_world(scene.route_xy, origin, heading)
+    inside = np.flatnonzero(in_grid(grid_from_ego(points, grid), grid))
+    if inside.size == 0:
+        return out
+    points = np.concatenate([np.zeros((1, 2)), points[: inside[-1] + 1]])
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+    along = np.append(np.arange(0.0, arc[-1], ROUTE_STEP_M), arc[-1])[:ROUTE_POINTS]
+    dense = np.column_stack([np.interp(along, arc, points[:, 0]), np.interp(along, arc, points[:, 1])])
+    out[: len(dense)] = np.clip(grid_from_ego(dense, grid), 0, [grid.rows - 1, grid.cols - 1])
+    return out
 
 
 def start_cell(grid: GridConfig) -> tuple[int, int]:

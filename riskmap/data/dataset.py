@@ -33,6 +33,7 @@ from rasterize.maps import (
     demo_path_cells,
     goal_map,
     motion_features,
+    route_cells,
     route_goal_cell,
     start_cell,
     uncertainty_map,
@@ -42,7 +43,6 @@ from rasterize.raster import rasterize_scene
 from rasterize.scene import Scene
 from rasterize.scene_io import check_packed, unpack_scene
 from riskmap.data.collect import FORMAT_VERSION, INDEX, MANIFEST
-from riskmap.planner.risk_goal import route_cells
 from riskmap.infra.atomic import read_npz
 
 try:  # torch is optional for reading scenes, required for DataLoader use

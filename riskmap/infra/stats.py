@@ -1,4 +1,5 @@
-"""Confidence intervals (reports, attack tables): Wilson intervals for rates, percentile bootstrap for means."""
+"""Confidence intervals (reports, attack tables): Wilson intervals for rates, percentile bootstrap for
+means; the sign test for paired outcomes (one planner against another on the same scenes)."""
 
 from __future__ import annotations
 
@@ -35,3 +36,13 @@ def bootstrap_mean(values) -> dict | None:
                         method="percentile", rng=np.random.default_rng(BOOTSTRAP_SEED))
         out["lo"], out["hi"] = float(res.confidence_interval.low), float(res.confidence_interval.high)
     return out
+
+
+def sign_test(a_only: int, b_only: int) -> float:
+    """Two-sided sign test p-value of paired binary outcomes: `a_only` pairs where only A had the
+    event, `b_only` where only B had it (ties carry no information); 1.0 with no discordant pair."""
+    if a_only + b_only == 0:
+        return 1.0
+    from scipy.stats import binomtest
+
+    return float(binomtest(a_only, a_only + b_only).pvalue)

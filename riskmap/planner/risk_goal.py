@@ -21,15 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rasterize.config import GridConfig
 from rasterize.errors import InputError
-from rasterize.frames import ego_from_world, ego_pose, grid_from_ego, in_grid
-from rasterize.scene import Scene
-
-# The route is checked at points this far apart (m), in training and in closed loop alike; a
-# sample holds at most ROUTE_POINTS of them (256 m: more than any grid's reach ahead).
-ROUTE_STEP_M = 1.0
-ROUTE_POINTS = 256
+from rasterize.maps import ROUTE_STEP_M
 
 
 @dataclass(frozen=True)
@@ -66,32 +59,12 @@ class RiskGoalConfig:
             raise InputError(f"risk goal settings must be non-negative, got {self}")
 
 
-def route_cells(scene: Scene, grid: GridConfig) -> np.ndarray:
-    """[ROUTE_POINTS, 2] cells (row, col) of points every ROUTE_STEP_M along the ego's route, from
-    the ego (distance 0) to its last point inside the grid, padded with −1 (all −1 without a
-    route or with none of it inside)."""
-    out = np.full((ROUTE_POINTS, 2), -1, dtype=np.int64)
-    if scene.route_xy is None:
-        return out
-    origin, heading = ego_pose(scene)
-    points = ego_from_world(scene.route_xy, origin, heading)
-    inside = np.flatnonzero(in_grid(grid_from_ego(points, grid), grid))
-    if inside.size == 0:
-        return out
-    points = np.concatenate([np.zeros((1, 2)), points[: inside[-1] + 1]])
-    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
-    along = np.append(np.arange(0.0, arc[-1], ROUTE_STEP_M), arc[-1])[:ROUTE_POINTS]
-    dense = np.column_stack([np.interp(along, arc, points[:, 0]), np.interp(along, arc, points[:, 1])])
-    out[: len(dense)] = np.clip(grid_from_ego(dense, grid), 0, [grid.rows - 1, grid.cols - 1])
-    return out
-
-
 def risk_goal_cell(reward: np.ndarray, cells: np.ndarray, speed_mps: float,
                    config: RiskGoalConfig) -> tuple[int, int] | None:
     """The goal cell held `margin_m` short of the first blocked point of the route (no nearer than
     `min_goal_m` and the stopping distance), or None where the checked stretch is clear or the
     held-back goal would not be nearer than the route rule's (the route rule's goal stands). reward [G, G]; cells [P, 2] as
-    `route_cells` gives them (−1 rows are padding). A point is blocked when its footprint (its
+    `rasterize.maps.route_cells` gives them (−1 rows are padding). A point is blocked when its footprint (its
     cell and `half_width_cells` either side, the lowest reward) is below `threshold`; checked are
     the points between `skip_m` and `skip_m + speed × reach_s` along the route."""
     cells = cells[cells[:, 0] >= 0]
@@ -107,7 +80,7 @@ def risk_goal_cell(reward: np.ndarray, cells: np.ndarray, speed_mps: float,
         return None
     speed = max(speed_mps, 0.0)
     floor_m = max(config.min_goal_m, speed * speed / (2.0 * config.brake_mps2))
-    k = max(hit[0] - int(round(config.margin_m / ROUTE_STEP_M)), int(np.ceil(floor_m / ROUTE_STEP_M)))
+    k = max(int(hit[0]) - round(config.margin_m / ROUTE_STEP_M), int(np.ceil(floor_m / ROUTE_STEP_M)))
     if k >= len(cells) - 1:
         return None
     r, c = cells[k]

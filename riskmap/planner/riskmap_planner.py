@@ -10,13 +10,20 @@ import torch
 
 from rasterize.config import GridConfig, RasterConfig
 from rasterize.errors import InputError
-from rasterize.maps import goal_map, motion_features, route_goal_cell, route_goal_point, start_cell
+from rasterize.maps import (
+    goal_map,
+    motion_features,
+    route_cells,
+    route_goal_cell,
+    route_goal_point,
+    start_cell,
+)
 from rasterize.raster import rasterize_scene
 from rasterize.scene import Scene
 from riskmap.infra.checkpoint import route_settings_of
 from riskmap.planner.gap_keeping import keep_gap
 from riskmap.planner.irl import goal_log_map
-from riskmap.planner.risk_goal import RiskGoalConfig, risk_goal_cell, route_cells
+from riskmap.planner.risk_goal import RiskGoalConfig, risk_goal_cell
 from riskmap.planner.sampler import SamplerConfig, sample_trajectory
 from riskmap.planner.vi import soft_value_iteration, state_visitation
 from riskmap.sim.plan import Plan

@@ -100,10 +100,9 @@ class TrainConfig:
     def irl(self, goal_variance: float):
         """The IRL settings of this run (riskmap.planner.irl.IRLConfig) with the goal variance
         it resolved (`riskmap.training.train.resolve_goal_variance`)."""
-        from riskmap.planner.irl import IRLConfig
-
         from dataclasses import asdict
 
+        from riskmap.planner.irl import IRLConfig
         from riskmap.planner.risk_goal import RiskGoalConfig
 
         risk_goal = None

@@ -5,7 +5,7 @@ import pytest
 
 from adversary.attacks.monitor import collision_type
 from adversary.crash.solution import ego_only_solution
-from riskmap.infra.stats import bootstrap_mean, wilson
+from riskmap.infra.stats import bootstrap_mean, sign_test, wilson
 from riskmap.sim.aggressive import softmin_agent_weights
 
 
@@ -19,6 +19,14 @@ def test_wilson_interval_matches_the_closed_form():
     assert stat["lo"] == pytest.approx(centre - half, abs=1e-9)
     assert stat["hi"] == pytest.approx(centre + half, abs=1e-9)
     assert wilson(0, 0) is None
+
+
+def test_sign_test_matches_the_binomial_by_hand():
+    assert sign_test(8, 0) == pytest.approx(2 * 0.5 ** 8)             # all 8 discordant pairs one way
+    assert sign_test(0, 8) == sign_test(8, 0)
+    # 1 against 3: P(X <= 1) + P(X >= 3) for X ~ Bin(4, 1/2) = (1 + 4 + 4 + 1) / 16
+    assert sign_test(1, 3) == pytest.approx(10 / 16)
+    assert sign_test(0, 0) == 1.0
 
 
 def test_bootstrap_is_deterministic_and_brackets_the_mean():

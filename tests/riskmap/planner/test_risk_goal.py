@@ -10,15 +10,10 @@ import torch
 from rasterize.config import Extent, GridConfig
 from rasterize.errors import InputError
 from rasterize.frames import grid_from_ego
+from rasterize.maps import ROUTE_POINTS, route_cells
 from rasterize.scene import Scene
 from riskmap.planner.irl import IRLConfig, goal_cells, goal_log_map, irl_step
-from riskmap.planner.risk_goal import (
-    ROUTE_POINTS,
-    RiskGoalConfig,
-    risk_goal_cell,
-    risk_goal_cells,
-    route_cells,
-)
+from riskmap.planner.risk_goal import RiskGoalConfig, risk_goal_cell, risk_goal_cells
 from tests.scenes import state
 
 # 1 m cells, 100 m ahead and 10 m behind, 10 m either side: cell (row, col) holds
