@@ -46,7 +46,13 @@ def risk_goal_of(side: dict) -> RiskGoalConfig | None:
     `planning.risk_goal` settings, else its training's `irl.risk_goal`; None (the route rule's
     goal alone, as every checkpoint before it) where neither names one."""
     settings = side.get("planning", {}).get("risk_goal", side.get("irl", {}).get("risk_goal"))
-    return None if settings is None else RiskGoalConfig(**settings)
+    if settings is None:
+        return None
+    known = set(RiskGoalConfig.__dataclass_fields__)
+    if not isinstance(settings, dict) or set(settings) - known:
+        raise InputError(f"the sidecar's risk_goal {settings!r} is not a mapping of "
+                         f"{', '.join(sorted(known))}; fix or remove it")
+    return RiskGoalConfig(**settings)
 
 
 class RiskMapPlanner:

@@ -150,6 +150,8 @@ def test_the_planning_section_overrides_the_training_rule_and_none_means_the_rou
     assert risk_goal_of(trained).threshold == -7.0
     assert risk_goal_of({**trained, "planning": {"risk_goal": {"threshold": -3.0}}}).threshold == -3.0
     assert risk_goal_of({"irl": {"goal_variance": 5.0}, "planning": {}}) is None
+    with pytest.raises(InputError, match="risk_goal"):
+        risk_goal_of({"planning": {"risk_goal": {"treshold": -6.0}}})
 
 
 def test_a_model_trained_with_the_rule_plans_with_it(tiny_dataset, tmp_path):
