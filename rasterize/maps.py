@@ -147,15 +147,22 @@ def demo_goal_cell(scene: Scene, grid: GridConfig) -> tuple[int, int]:
     return int(r), int(c)
 
 
-def route_goal_point(scene: Scene, grid: GridConfig) -> np.ndarray | None:
-    """The ego-frame point [2] (metres) inside `route_goal_cell`: the last route point inside the
-    grid, or None without a route or with none of it inside."""
+def _route_to_goal(scene: Scene, grid: GridConfig) -> np.ndarray | None:
+    """[K, 2] ego-frame points (metres) of the ego's route up to its last point inside the grid,
+    or None without a route or with none of it inside: what the goal rules below all read."""
     if scene.route_xy is None:
         return None
     origin, heading = ego_pose(scene)
     points = ego_from_world(scene.route_xy, origin, heading)
     inside = np.flatnonzero(in_grid(grid_from_ego(points, grid), grid))
-    return points[inside[-1]] if inside.size else None
+    return points[: inside[-1] + 1] if inside.size else None
+
+
+def route_goal_point(scene: Scene, grid: GridConfig) -> np.ndarray | None:
+    """The ego-frame point [2] (metres) inside `route_goal_cell`: the last route point inside the
+    grid, or None without a route or with none of it inside."""
+    points = _route_to_goal(scene, grid)
+    return None if points is None else points[-1]
 
 
 def route_goal_cell(scene: Scene, grid: GridConfig) -> tuple[int, int]:
@@ -165,12 +172,10 @@ def route_goal_cell(scene: Scene, grid: GridConfig) -> tuple[int, int]:
     """
     if scene.route_xy is None:
         return demo_goal_cell(scene, grid)
-    origin, heading = ego_pose(scene)
-    cells = grid_from_ego(ego_from_world(scene.route_xy, origin, heading), grid)
-    inside = np.flatnonzero(in_grid(cells, grid))
-    if inside.size == 0:
+    goal = route_goal_point(scene, grid)
+    if goal is None:
         return start_cell(grid)
-    r, c = cells[inside[-1]]
+    r, c = grid_from_ego(goal, grid)
     return int(r), int(c)
 
 
@@ -179,14 +184,10 @@ def route_cells(scene: Scene, grid: GridConfig) -> np.ndarray:
     the ego (distance 0) to its last point inside the grid, padded with −1 (all −1 without a
     route or with none of it inside)."""
     out = np.full((ROUTE_POINTS, 2), -1, dtype=np.int64)
-    if scene.route_xy is None:
+    points = _route_to_goal(scene, grid)
+    if points is None:
         return out
-    origin, heading = ego_pose(scene)
-    points = ego_from_world(scene.route_xy, origin, heading)
-    inside = np.flatnonzero(in_grid(grid_from_ego(points, grid), grid))
-    if inside.size == 0:
-        return out
-    points = np.concatenate([np.zeros((1, 2)), points[: inside[-1] + 1]])
+    points = np.concatenate([np.zeros((1, 2)), points])
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
     along = np.append(np.arange(0.0, arc[-1], ROUTE_STEP_M), arc[-1])[:ROUTE_POINTS]
     dense = np.column_stack([np.interp(along, arc, points[:, 0]), np.interp(along, arc, points[:, 1])])

@@ -11,8 +11,9 @@ experiments/README.md "Hardening"). Here the risk map itself decides where the r
 the same rule in training (goal maps from the model's own, detached risk map) and in closed loop,
 so the map can learn to brake the ego.
 
-Shapes: reward [G, G] (the model's output, higher is better: reward = −cost); route points
-[P, 2] ego frame metres (x forward, y left), from the ego to the route rule's goal.
+Shapes: reward [G, G] (the model's output, higher is better: reward = −cost); route cells
+[P, 2] (row, col) every `rasterize.maps.ROUTE_STEP_M` from the ego to the route rule's goal,
+padded with −1 (`rasterize.maps.route_cells`).
 """
 
 from __future__ import annotations
@@ -63,10 +64,11 @@ def risk_goal_cell(reward: np.ndarray, cells: np.ndarray, speed_mps: float,
                    config: RiskGoalConfig) -> tuple[int, int] | None:
     """The goal cell held `margin_m` short of the first blocked point of the route (no nearer than
     `min_goal_m` and the stopping distance), or None where the checked stretch is clear or the
-    held-back goal would not be nearer than the route rule's (the route rule's goal stands). reward [G, G]; cells [P, 2] as
-    `rasterize.maps.route_cells` gives them (−1 rows are padding). A point is blocked when its footprint (its
-    cell and `half_width_cells` either side, the lowest reward) is below `threshold`; checked are
-    the points between `skip_m` and `skip_m + speed × reach_s` along the route."""
+    held-back goal would not be nearer than the route rule's (the route rule's goal stands).
+
+    A point is blocked when its footprint (its cell and `half_width_cells` either side, the
+    lowest reward) is below `threshold`; checked are the points between `skip_m` and
+    `skip_m + speed × reach_s` along the route."""
     cells = cells[cells[:, 0] >= 0]
     if len(cells) == 0:
         return None
