@@ -171,7 +171,8 @@ def fine_tune(config: HardenConfig, r: int, shards: list[Path], progress: bool) 
         goal=trained.get("goal", "route"), epochs=config.epochs, batch_size=trained["batch_size"], lr=config.lr,
         horizon=trained["horizon"], val_groups=tuple(data["validation_groups"]), seed=config.seed + r,
         init_checkpoint=str(planner_path(config, r - 1)), predict_s=trained.get("predict_s"),
-        risk_goal_threshold=config.risk_goal_threshold)
+        risk_goal_threshold=config.risk_goal_threshold,
+        timing_head=bool(original["model"].get("timing_head", False)))
     resume = (here / "train" / "state.pt").exists()
     train(settings, resume=resume, progress=progress)
     last = here / "train" / "last"

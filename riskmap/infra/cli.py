@@ -130,6 +130,8 @@ def add_config_options(parser: argparse.ArgumentParser, config_type: type, *name
             default, required = None, True
         kwargs = {"dest": name, "type": option_types.get(name, _option_type(hints[name])),
                   "help": help.get(name, field.metadata.get("help"))}
+        if hints[name] is bool and default is False:     # a switch, off unless named
+            kwargs = {"dest": name, "action": "store_true", "help": kwargs["help"]}
         if name in choices:
             kwargs["choices"] = tuple(choices[name])
         if required:

@@ -31,13 +31,12 @@ from rasterize.maps import goal_map, route_goal_cell
 from rasterize.raster import rasterize_scene
 from rasterize.scene import Scene
 from riskmap.infra.checkpoint import route_settings_of
-from riskmap.planner.model import ModelConfig, RiskMapGenerator
+from riskmap.planner.model import SPEED_SCALE_MPS, ModelConfig, RiskMapGenerator
 from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, Plan
 
 BC_KINDS = ("cnn", "cnn_lstm", "rvsg")
 CHECKPOINT_KIND = "bc"
 WAYPOINT_SCALE_M = 10.0   # the head predicts waypoints in units of 10 m: outputs of order 1
-SPEED_SCALE_MPS = 30.0    # ego speed input divided by this
 
 
 def normalise_kind(kind: str) -> str:

@@ -3,6 +3,15 @@
     raster [B, C, 200, 200] ─ ResNet-34 stem + layer1 ─► [B, 64, 50, 50] ─ conv ─► resize to G×G
     ─ concat motion features [B, 3, G, G] ─ 1×1 convs 67→32→32→1 ─ LogSigmoid ─► risk [B, G, G]
 
+With `timing_head` (our addition; the paper's planner has no notion of time along its path), the
+same encoder features, detached, also feed
+
+    [B, 64, G', G'] ─ 2 strided 3×3 convs ─ pool 6×6 ─ MLP (+ ego speed) ─► arc lengths [B, 12]
+
+the distance along its path the ego covers by each of the 12 waypoint times (0.5 s apart),
+learned from the demonstrations' own futures (`timing_loss`). Detached, so the risk map stays
+exactly what MaxEnt IRL makes of the data: the head reads it, never bends it.
+
 Rewards are ≤ 0 (LogSigmoid). The stem's first convolution takes the raster's C channels;
 `load_backbone_weights` adapts a local torchvision ResNet-34 state dict (never a hub download).
 """
@@ -21,6 +30,7 @@ from torchvision.models import resnet34
 from rasterize.config import RasterConfig
 from rasterize.errors import InputError
 from riskmap.infra.checkpoint import load_weights, read_sidecar
+from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS
 
 
 @dataclass(frozen=True)
@@ -29,9 +39,54 @@ class ModelConfig:
     resolution: int = 50          # risk-map grid G (25, 50, 75, 100 ...)
     encoder_channels: int = 64    # after the extra conv
     head_channels: int = 32
+    timing_head: bool = False     # also predict the arc lengths of the 12 waypoints (`TimingHead`)
 
     def to_dict(self) -> dict:
         return asdict(self)
+
+
+SPEED_SCALE_MPS = 30.0            # speed input and outputs divided by this: numbers of order 1
+
+
+class TimingHead(nn.Module):
+    """Encoder features [B, C, G', G'] and ego speed [B] (m/s) → arc lengths [B, 12] (m), never
+    decreasing, at 0.5 s steps.
+
+    The head predicts one speed per step as softplus(z · 30 m/s + softplus⁻¹(v)): an output of
+    zero is the ego's present speed held (the few epochs a CPU affords start from a sensible
+    drive), a speed is never negative, and the arc lengths are their running sum × 0.5 s."""
+
+    def __init__(self, channels: int, hidden: int = 128):
+        super().__init__()
+        self.reduce = nn.Sequential(
+            nn.Conv2d(channels, 32, kernel_size=3, stride=2, padding=1), nn.ReLU(inplace=True),
+            nn.Conv2d(32, 32, kernel_size=3, stride=2, padding=1), nn.ReLU(inplace=True),
+            nn.AdaptiveAvgPool2d(6), nn.Flatten(),
+        )
+        self.mlp = nn.Sequential(nn.Linear(32 * 36 + 1, hidden), nn.ReLU(inplace=True),
+                                 nn.Linear(hidden, PLAN_STEPS))
+        nn.init.zeros_(self.mlp[-1].weight)      # starts at constant speed
+        nn.init.zeros_(self.mlp[-1].bias)
+
+    def forward(self, features: torch.Tensor, speed: torch.Tensor) -> torch.Tensor:
+        speed = speed.clamp_min(0.1)             # softplus⁻¹ needs a positive speed
+        z = self.mlp(torch.cat([self.reduce(features), (speed / SPEED_SCALE_MPS)[:, None]], dim=1))
+        held = speed + torch.log(-torch.expm1(-speed))               # softplus⁻¹(v), stable
+        speeds = F.softplus(z * SPEED_SCALE_MPS + held[:, None])      # [B, 12] m/s
+        return PLAN_DT_S * speeds.cumsum(dim=1)
+
+
+def timing_loss(arc_lengths: torch.Tensor, future: torch.Tensor) -> torch.Tensor:
+    """Mean Huber loss (1 m) between predicted arc lengths [B, 12] and the demonstrations' own:
+    the length of the recorded future [B, 12, 2] (ego frame, m) from the ego to each waypoint."""
+    return F.smooth_l1_loss(arc_lengths, demo_arc_lengths(future), beta=1.0)
+
+
+def demo_arc_lengths(future: torch.Tensor) -> torch.Tensor:
+    """[B, 12] distance along the recorded future [B, 12, 2] from the ego (the origin) to each
+    waypoint, metres."""
+    line = torch.cat([torch.zeros_like(future[:, :1]), future], dim=1)
+    return torch.linalg.vector_norm(line.diff(dim=1), dim=-1).cumsum(dim=1)
 
 
 class RiskMapGenerator(nn.Module):
@@ -54,11 +109,23 @@ class RiskMapGenerator(nn.Module):
             nn.Conv2d(config.head_channels, config.head_channels, 1), nn.ReLU(inplace=True),
             nn.Conv2d(config.head_channels, 1, 1),
         )
+        self.timing = TimingHead(config.encoder_channels) if config.timing_head else None
 
     def forward(self, raster: torch.Tensor, motion: torch.Tensor) -> torch.Tensor:
         """raster [B, C, H, W], motion [B, 3, G, G] → risk map [B, G, G] (≤ 0)."""
-        g = self.config.resolution
+        return self._risk(self.encoder_conv(self.backbone(raster)), motion)
+
+    def forward_timed(self, raster: torch.Tensor, motion: torch.Tensor
+                      ) -> tuple[torch.Tensor, torch.Tensor]:
+        """(risk map [B, G, G], arc lengths [B, 12] m): the timing head reads the same features,
+        detached (module doc); motion's first channel is the ego's speed."""
+        if self.timing is None:
+            raise InputError("this risk-map network has no timing head; train one with --timing-head")
         features = self.encoder_conv(self.backbone(raster))
+        return self._risk(features, motion), self.timing(features.detach(), motion[:, 0, 0, 0])
+
+    def _risk(self, features: torch.Tensor, motion: torch.Tensor) -> torch.Tensor:
+        g = self.config.resolution
         if features.shape[-2:] != (g, g):
             mode = "area" if features.shape[-1] > g else "bilinear"
             features = F.interpolate(features, size=(g, g), mode=mode,

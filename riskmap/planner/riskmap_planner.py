@@ -98,9 +98,12 @@ class RiskMapPlanner:
             variance = side.get("planning", {}).get("goal_variance", side["irl"]["goal_variance"])
         if variance <= 0:
             raise InputError(f"goal variance must be > 0 cells², got {variance}")
+        sampler = sampler_of(side)
+        if sampler.timing == "learned" and model.timing is None:
+            raise InputError(f"checkpoint {checkpoint} plans with learned timing but its network "
+                             "has no timing head; set the sidecar's planning timing to kinematic")
         planner = cls(model, RasterConfig.from_dict(side["raster"]), GridConfig.from_dict(side["grid"]),
-                      side["irl"]["horizon"], variance, side["irl"]["gamma"],
-                      sampler_of(side), seed)
+                      side["irl"]["horizon"], variance, side["irl"]["gamma"], sampler, seed)
         planner.route_settings = route_settings_of(side)
         planner.risk_goal = risk_goal_of(side)
         return planner
@@ -120,8 +123,13 @@ class RiskMapPlanner:
         with torch.inference_mode():
             t0 = time.perf_counter()
             image = torch.from_numpy(raster).float().div_(255.0)[None]
-            risk = self.model(image.contiguous(memory_format=torch.channels_last),
-                              torch.from_numpy(motion)[None])
+            image = image.contiguous(memory_format=torch.channels_last)
+            arc_lengths = None
+            if self.sampler.timing == "learned":
+                risk, arcs = self.model.forward_timed(image, torch.from_numpy(motion)[None])
+                arc_lengths = arcs[0].double().numpy()
+            else:
+                risk = self.model(image, torch.from_numpy(motion)[None])
             t["network"] = time.perf_counter() - t0
             t0 = time.perf_counter()
             goal_xy, variance = route_goal_point(scene, self.grid), self.goal_variance
@@ -137,7 +145,7 @@ class RiskMapPlanner:
         waypoints = sample_trajectory(policy[0], start, self.horizon, self.grid, self.sampler,
                                       seed=(self.seed * 1_000_003 + self._calls) % 2**32,  # any planner seed
                                       speed_mps=float(scene.states[scene.ego_index, scene.current_index, 4]),
-                                      goal_xy=goal_xy)
+                                      goal_xy=goal_xy, arc_lengths=arc_lengths)
         if self.sampler.keep_gap:
             waypoints = keep_gap(waypoints, scene, self.sampler.dt_s,
                                  prediction=self.sampler.gap_prediction)

@@ -18,7 +18,7 @@ from rasterize.errors import InputError
 from rasterize.frames import ego_from_grid, grid_from_ego
 from riskmap.planner.vi import END, MOVES
 
-TIMINGS = ("uniform", "kinematic")
+TIMINGS = ("uniform", "kinematic", "learned")
 
 
 @dataclass(frozen=True)
@@ -27,7 +27,9 @@ class SamplerConfig:
     in distance (constant speed from the start, whatever the ego's speed now); `kinematic`: the
     ego's current speed, changed at the one constant acceleration that ends the path at 6 s
     (at most `max_accel_mps2`; where that would mean reversing, braking to a stop at its end):
-    `kinematic_arc_lengths`. Checkpoints from before `timing` existed plan `uniform`."""
+    `kinematic_arc_lengths`; `learned`: the arc lengths the network's timing head predicts
+    (`riskmap.planner.model.TimingHead`), never beyond the path's end. Checkpoints from before
+    `timing` existed plan `uniform`."""
 
     samples: int = 1000
     clusters: int = 10
@@ -65,9 +67,11 @@ def kinematic_arc_lengths(length_m: float, speed_mps: float, times_s: np.ndarray
 
 
 def retime(path_cells: np.ndarray, moves: int, grid: GridConfig, speed_mps: float,
-           config: SamplerConfig, goal_xy: np.ndarray | None = None) -> np.ndarray:
+           config: SamplerConfig, goal_xy: np.ndarray | None = None,
+           arc_lengths: np.ndarray | None = None) -> np.ndarray:
     """[config.waypoints, 2] ego-frame waypoints along one cell path [N + 1, 2] (its first
-    `moves` moves) at `kinematic_arc_lengths`.
+    `moves` moves) at `kinematic_arc_lengths`, or at `arc_lengths` [config.waypoints] (metres,
+    non-decreasing) where given, each held at the path's end if beyond it.
 
     The path starts at the ego itself (the origin), not at its cell's centre: that centre lies up
     to half a cell away (0.6 m ahead on the US-101 grid), and a plan that starts there asks a
@@ -83,7 +87,10 @@ def retime(path_cells: np.ndarray, moves: int, grid: GridConfig, speed_mps: floa
         centres[-1] = goal_xy       # it ends in the goal's cell: end at the goal itself
     cum = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(centres, axis=0), axis=1))])
     times = config.dt_s * np.arange(1, config.waypoints + 1)
-    s = kinematic_arc_lengths(float(cum[-1]), speed_mps, times, config.max_accel_mps2)
+    if arc_lengths is None:
+        s = kinematic_arc_lengths(float(cum[-1]), speed_mps, times, config.max_accel_mps2)
+    else:
+        s = np.clip(np.maximum.accumulate(np.asarray(arc_lengths, float)), 0.0, float(cum[-1]))
     if len(centres) == 1:
         return np.repeat(centres, config.waypoints, axis=0)
     return np.column_stack([np.interp(s, cum, centres[:, 0]), np.interp(s, cum, centres[:, 1])])
@@ -246,11 +253,13 @@ def kmeans(points: np.ndarray, k: int, seed: int, max_iterations: int = 100,
 
 def sample_trajectory(policy: torch.Tensor, start: tuple[int, int], horizon: int, grid: GridConfig,
                       config: SamplerConfig = SamplerConfig(), seed: int = 0,
-                      speed_mps: float | None = None, goal_xy: np.ndarray | None = None) -> np.ndarray:
+                      speed_mps: float | None = None, goal_xy: np.ndarray | None = None,
+                      arc_lengths: np.ndarray | None = None) -> np.ndarray:
     """Waypoints [config.waypoints, 2] in the ego frame: the most central path of the largest
     cluster of `config.samples` sampled paths, timed by `config.timing` (`kinematic` needs the
     ego's `speed_mps`, and ends at the exact goal `goal_xy` when given and the path reaches its
-    cell; without a speed the waypoints are uniform). Deterministic given `seed`."""
+    cell; `learned` needs the timing head's `arc_lengths` [config.waypoints] m as well; without
+    them the waypoints are uniform). Deterministic given `seed`."""
     generator = torch.Generator().manual_seed(seed)
     flat, moves = _walk(policy.detach().cpu(), start, horizon, config.samples, generator)
     # Represent each path by its own evenly spaced waypoints, then cluster those.
@@ -262,7 +271,9 @@ def sample_trajectory(policy: torch.Tensor, start: tuple[int, int], horizon: int
     members = np.flatnonzero(labels == largest)
     centre = flat_feats[members].mean(axis=0)
     best = members[np.argmin(((flat_feats[members] - centre) ** 2).sum(axis=1))]
-    if config.timing == "kinematic" and speed_mps is not None:
+    learned = config.timing == "learned" and arc_lengths is not None
+    if (config.timing == "kinematic" or learned) and speed_mps is not None:
         path = np.stack(np.divmod(flat[best], grid.cols), axis=-1)
-        return retime(path, int(moves[best]), grid, speed_mps, config, goal_xy)
+        return retime(path, int(moves[best]), grid, speed_mps, config, goal_xy,
+                      arc_lengths if learned else None)
     return flat_feats[best].reshape(config.waypoints, 2)

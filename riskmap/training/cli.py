@@ -54,6 +54,9 @@ HELP = {
     "risk_goal_threshold": "hold each window's goal short on the route where the model's own risk map falls "
                            "below this reward, as the planner then does in closed loop "
                            "(riskmap.planner.risk_goal; default: the route rule's goal)",
+    "timing_head": "also learn the demonstrations' timing: a head predicting how far along its path "
+                   "the ego is at each waypoint time, by which the planner then times its plan",
+    "freeze_risk": "train only the timing head; the risk map stays --init-checkpoint's",
     "predict_s": "draw the other agents' predicted future (constant speed along their lanes) and "
                  "the traffic lights' red over this many seconds as 2 extra raster channels "
                  "(0: none; default: as the dataset was collected, normally none)",
@@ -65,7 +68,8 @@ def add_parsers(sub) -> None:
     add_config_options(p, TrainConfig, "data", "out", "resolution", "uncertainty_weight", "sigma_x",
                        "sigma_y", "goal_variance", "goal", "epochs", "batch_size", "lr", "horizon",
                        "val_groups", "device", "seed", "backbone_weights", "init_checkpoint",
-                       "max_windows", "predict_s", "risk_goal_threshold", "workers", "cache", help=HELP,
+                       "max_windows", "predict_s", "risk_goal_threshold", "timing_head", "freeze_risk",
+                       "workers", "cache", help=HELP,
                        option_types=POSITIVE)
     p.add_argument("--resume", action="store_true", help="continue an interrupted run exactly")
     p.add_argument("--quiet", action="store_true")

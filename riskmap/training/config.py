@@ -64,6 +64,14 @@ class TrainConfig:
     # (riskmap.planner.risk_goal, the other settings its defaults); None: the route rule's goal.
     # The planner then plans with the same rule.
     risk_goal_threshold: float | None = None
+    # Also learn when to be where: a head on the encoder's features predicting the arc lengths
+    # of the demonstration's 12 waypoints (riskmap.planner.model.TimingHead), trained with a
+    # Huber loss in metres added to the IRL loss (no weight: the head reads detached features,
+    # so the two losses train disjoint parameters and Adam's steps do not see their scales);
+    # the planner then times its path by it (sampler timing `learned`). `freeze_risk`: train the
+    # timing head alone, the risk map kept exactly as --init-checkpoint's.
+    timing_head: bool = False
+    freeze_risk: bool = False
     # How samples are made; neither changes what is computed (a resume may change them):
     workers: int | None = None          # sample processes; None: 0 on the CPU, else up to 4
     cache: str = "auto"                 # sample cache folder; auto: DATA/cache, else OUT/cache; off
@@ -85,6 +93,9 @@ class TrainConfig:
                                  f"{getattr(self, name)}")
         if self.risk_goal_threshold is not None and not math.isfinite(self.risk_goal_threshold):
             raise InputError(f"--risk-goal-threshold must be a finite reward, got {self.risk_goal_threshold}")
+        if self.freeze_risk and not (self.timing_head and self.init_checkpoint):
+            raise InputError("--freeze-risk trains only the timing head of a trained network; pass "
+                             "--timing-head and --init-checkpoint too, or drop --freeze-risk")
         if not math.isfinite(self.uncertainty_weight) or self.uncertainty_weight < 0:
             raise InputError(f"--uncertainty-weight must be a finite number >= 0, got "
                              f"{self.uncertainty_weight}")

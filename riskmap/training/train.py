@@ -36,7 +36,13 @@ from riskmap.infra.checkpoint import CHECKPOINT_KIND, save_checkpoint
 from riskmap.infra.config_mapping import to_plain
 from riskmap.infra.rundir import lock_out_dir
 from riskmap.planner.irl import demo_negative_log_likelihood, irl_step
-from riskmap.planner.model import ModelConfig, RiskMapGenerator, load_backbone_weights
+from riskmap.planner.model import (
+    ModelConfig,
+    RiskMapGenerator,
+    demo_arc_lengths,
+    load_backbone_weights,
+    timing_loss,
+)
 from riskmap.planner.sampler import SamplerConfig, sample_trajectory
 from riskmap.training.config import TrainConfig
 from riskmap.training.progress import (
@@ -166,28 +172,48 @@ def attach_sample_cache(dataset: DemoDataset, config: TrainConfig, out: Path,
         print(f"no sample cache ({error}); samples are built every epoch", file=sys.stderr)
 
 
+def sampler_for(config: TrainConfig) -> SamplerConfig:
+    """The sampler a run's checkpoint plans with: today's default, timed by the timing head
+    where the run trains one."""
+    return SamplerConfig(timing="learned") if config.timing_head else SamplerConfig()
+
+
+def _forward(model, batch: dict, timed: bool) -> tuple[torch.Tensor, torch.Tensor | None]:
+    """(risk [B, G, G], the timing head's arc lengths [B, 12] m or None)."""
+    if timed:
+        return model.forward_timed(batch["raster"], batch["motion"])
+    return model(batch["raster"], batch["motion"]), None
+
+
 def _evaluate(model, loader, config: TrainConfig, irl, grid, device,
               channels_last: bool = False) -> dict:
     model.eval()
-    nll, ade, fde, seen = [], [], [], 0
+    nll, ade, fde, timing, seen = [], [], [], [], 0
+    sampler = sampler_for(config)
     with torch.no_grad():
         for batch in loader:
             batch = _to(batch, device, channels_last)
-            risk = model(batch["raster"], batch["motion"])
+            risk, arcs = _forward(model, batch, config.timing_head)
             step = irl_step(risk, batch, irl)
             nll.append(demo_negative_log_likelihood(step.policy, batch["demo_path"]).cpu())
+            if arcs is not None:
+                timing.append((arcs - demo_arc_lengths(batch["future"])).abs().mean(dim=1).cpu())
             for i in range(risk.shape[0]):
                 if seen >= config.val_ade_windows:
                     break
                 plan = sample_trajectory(step.policy[i].cpu(), tuple(batch["start_cell"][i].tolist()),
-                                         config.horizon, grid, SamplerConfig(), seed=seen,
-                                         speed_mps=float(batch["motion"][i, 0, 0, 0]))
+                                         config.horizon, grid, sampler, seed=seen,
+                                         speed_mps=float(batch["motion"][i, 0, 0, 0]),
+                                         arc_lengths=None if arcs is None else arcs[i].double().cpu().numpy())
                 err = np.linalg.norm(plan - batch["future"][i].cpu().numpy(), axis=1)
                 ade.append(err.mean())
                 fde.append(err[-1])
                 seen += 1
-    return {"val_nll": float(torch.cat(nll).mean()), "val_ade_m": float(np.mean(ade)),
-            "val_fde_m": float(np.mean(fde))}
+    metrics = {"val_nll": float(torch.cat(nll).mean()), "val_ade_m": float(np.mean(ade)),
+               "val_fde_m": float(np.mean(fde))}
+    if timing:      # mean |arc length error| over the 12 waypoints, metres
+        metrics["val_timing_m"] = float(torch.cat(timing).mean())
+    return metrics
 
 
 def dataset_sidecar(dataset: DemoDataset, train_idx: list[int], val_idx: list[int]) -> dict:
@@ -208,7 +234,7 @@ def _sidecar(config: TrainConfig, model_config: ModelConfig, dataset: DemoDatase
         "grid": dataset.grid.to_dict(),
         "irl": asdict(irl),
         "train": asdict(config),
-        "sampler": asdict(SamplerConfig()),
+        "sampler": asdict(sampler_for(config)),
         "maps": {"sigma_x": config.sigma_x, "sigma_y": config.sigma_y,
                  "goal_variance": irl.goal_variance, "goal": config.goal},
         "dataset": data,
@@ -253,18 +279,26 @@ def _init_from(model: RiskMapGenerator, model_config: ModelConfig, checkpoint: P
     """Start from a trained risk-map checkpoint's weights (fine-tuning); its network must be the
     one this run builds (grid resolution, raster channels), except that a raster with more
     channels (`--predict-s` on a checkpoint trained without) starts with the added ones off
-    (`with_raster_channels`)."""
+    (`with_raster_channels`), and a timing head the checkpoint lacks (`--timing-head`) starts
+    fresh."""
     from riskmap.planner.model import load_model
 
     trained, side = load_model(checkpoint)
     old = ModelConfig(**side["model"])
-    grows = (old.in_channels < model_config.in_channels
-             and replace(old, in_channels=model_config.in_channels) == model_config)
-    if old != model_config and not grows:
+    adds_head = model_config.timing_head and not old.timing_head
+    grows = old.in_channels < model_config.in_channels
+    if replace(old, in_channels=model_config.in_channels, timing_head=model_config.timing_head) \
+            != model_config or old.in_channels > model_config.in_channels \
+            or (old.timing_head and not model_config.timing_head):
         raise InputError(f"--init-checkpoint {checkpoint} is a {side['model']} network, this run "
-                         f"builds {model_config.to_dict()}; use a matching --resolution and --predict-s")
+                         f"builds {model_config.to_dict()}; use a matching --resolution, --predict-s "
+                         "and --timing-head")
     state = trained.state_dict()
-    model.load_state_dict(with_raster_channels(state, model_config.in_channels) if grows else state)
+    if grows:
+        state = with_raster_channels(state, model_config.in_channels)
+    if adds_head:
+        state |= {k: v for k, v in model.state_dict().items() if k.startswith("timing.")}
+    model.load_state_dict(state)
 
 
 def train(config: TrainConfig, resume: bool = False, progress: bool = True, on_epoch=None,
@@ -294,7 +328,7 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True, on_e
     augmented = PerturbedEgo(dataset, config.seed, config.augment_probability,
                              config.augment_heading_deg, config.augment_lateral_m)
     model_config = ModelConfig(in_channels=len(channels(dataset.raster_config)),
-                               resolution=config.resolution)
+                               resolution=config.resolution, timing_head=config.timing_head)
     model = RiskMapGenerator(model_config)
     if config.backbone_weights:
         load_backbone_weights(model, config.backbone_weights)
@@ -305,7 +339,8 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True, on_e
         channels_last = use_channels_last(device)
     if channels_last:
         model.to(memory_format=torch.channels_last)
-    optimizer = torch.optim.Adam(model.parameters(), lr=config.lr)
+    trained_parameters = model.timing.parameters() if config.freeze_risk else model.parameters()
+    optimizer = torch.optim.Adam(trained_parameters, lr=config.lr)
     start_epoch, best, rows = 0, {"val_ade_m": math.inf}, []
     state = read_progress(out, CHECKPOINT_KIND) if resume else None
     if state is not None:
@@ -321,6 +356,9 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True, on_e
     workers = sample_workers(config.workers, device)
     val_loader = _loader(Subset(dataset, val_idx), config.batch_size, workers)
     fields = ["epoch", "train_loss", "train_nll", "val_nll", "val_ade_m", "val_fde_m", "seconds"]
+    if config.timing_head:
+        fields[3:3] = ["train_timing"]
+        fields[-1:-1] = ["val_timing_m"]
 
     def publish(epoch: int, rows: list[dict], best: dict) -> None:
         """The files derived from the state committed after `epoch`."""
@@ -336,12 +374,15 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True, on_e
     for epoch in range(start_epoch, config.epochs):
         started = time.perf_counter()
         model.train()
+        if config.freeze_risk:          # the risk network's batch norms keep their statistics
+            model.eval()
+            model.timing.train()
         order = torch.randperm(len(train_idx),
                                generator=torch.Generator().manual_seed(config.seed * 100003 + epoch))
         augmented.set_epoch(epoch)
         loader = _loader(Subset(augmented, [train_idx[i] for i in order]), config.batch_size,
                          workers)
-        losses, nlls, waited = [], [], 0.0
+        losses, nlls, timings, waited = [], [], [], 0.0
         bar = tqdm(loader, desc=f"epoch {epoch + 1}/{config.epochs}", disable=not progress,
                    leave=False)
         batches = iter(bar)
@@ -352,10 +393,15 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True, on_e
             if batch is None:
                 break
             batch = _to(batch, device, channels_last)
-            risk = model(batch["raster"], batch["motion"])
+            risk, arcs = _forward(model, batch, config.timing_head)
             step = irl_step(risk, batch, irl)
+            loss = step.loss
+            if arcs is not None:
+                timed = timing_loss(arcs, batch["future"])
+                timings.append(timed.item())
+                loss = timed if config.freeze_risk else loss + timed
             optimizer.zero_grad()
-            step.loss.backward()
+            loss.backward()
             torch.nn.utils.clip_grad_norm_(model.parameters(), config.grad_clip)
             optimizer.step()
             losses.append(step.loss.item())
@@ -363,6 +409,7 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True, on_e
             bar.set_postfix(nll=f"{np.mean(nlls):.2f}")
         trained = time.perf_counter()
         metrics = {"train_loss": float(np.mean(losses)), "train_nll": float(np.mean(nlls)),
+                   **({"train_timing": float(np.mean(timings))} if timings else {}),
                    **_evaluate(model, val_loader, config, irl, dataset.grid, device, channels_last)}
         if on_epoch is not None:
             on_epoch(epoch, {"losses": losses, "nlls": nlls, "train_windows": len(train_idx),
