@@ -124,12 +124,13 @@ class RiskMapPlanner:
             t0 = time.perf_counter()
             image = torch.from_numpy(raster).float().div_(255.0)[None]
             image = image.contiguous(memory_format=torch.channels_last)
+            motion_t = torch.from_numpy(motion)[None]
             arc_lengths = None
             if self.sampler.timing == "learned":
-                risk, arcs = self.model.forward_timed(image, torch.from_numpy(motion)[None])
+                risk, arcs = self.model.forward_timed(image, motion_t)
                 arc_lengths = arcs[0].double().numpy()
             else:
-                risk = self.model(image, torch.from_numpy(motion)[None])
+                risk = self.model(image, motion_t)
             t["network"] = time.perf_counter() - t0
             t0 = time.perf_counter()
             goal_xy, variance = route_goal_point(scene, self.grid), self.goal_variance

@@ -287,9 +287,11 @@ def _init_from(model: RiskMapGenerator, model_config: ModelConfig, checkpoint: P
     old = ModelConfig(**side["model"])
     adds_head = model_config.timing_head and not old.timing_head
     grows = old.in_channels < model_config.in_channels
-    if replace(old, in_channels=model_config.in_channels, timing_head=model_config.timing_head) \
-            != model_config or old.in_channels > model_config.in_channels \
-            or (old.timing_head and not model_config.timing_head):
+    # Only more raster channels and a new head may differ; never fewer, never a head dropped.
+    same_network = replace(old, in_channels=model_config.in_channels,
+                           timing_head=model_config.timing_head) == model_config
+    shrinks = old.in_channels > model_config.in_channels or (old.timing_head and not model_config.timing_head)
+    if not same_network or shrinks:
         raise InputError(f"--init-checkpoint {checkpoint} is a {side['model']} network, this run "
                          f"builds {model_config.to_dict()}; use a matching --resolution, --predict-s "
                          "and --timing-head")
