@@ -60,22 +60,31 @@ HELP = {
     "selector_model": "selector directory (default: checkpoints/crash_selector_<family>)",
     "workers": "processes for attacks and evaluations",
     "batch_size": "scenes optimised together in an attack",
+    "search_templates": "also search these scenario templates with NSGA-II each round and train on every "
+                        "scenario that collided (default: CRASH's attacks only)",
+    "search_pop": "evaluations per generation of a round's search",
+    "search_gen": "generations of a round's search",
 }
 
 
 def add_parsers(subparsers) -> None:
     from adversary.harden.loop import HardenConfig
     from adversary.harden.windows import DEMONSTRATIONS
+    from adversary.search.scenarios import TEMPLATES
 
     p = subparsers.add_parser("harden", help="fine-tune a risk-map planner on the CRASH attacks that beat it")
-    add_config_options(p, HardenConfig, *(name for name in HELP if name != "natural_commonroad"), help=HELP,
+    add_config_options(p, HardenConfig, *(name for name in HELP if name not in ("natural_commonroad",
+                                                                                "search_templates")),
+                       help=HELP,
                        option_types={name: positive_int for name in ("rounds", "count", "epochs", "eval_count",
                                                                      "natural_episodes", "workers",
                                                                      "batch_size", "replan_every",
-                                                                     "ade_windows")},
+                                                                     "ade_windows", "search_pop", "search_gen")},
                        choices={"demonstration": DEMONSTRATIONS})
     p.add_argument("--natural-commonroad", nargs="+", default=(), metavar="DIR_OR_FILE",
                    help=HELP["natural_commonroad"])
+    p.add_argument("--search-templates", nargs="+", default=(), metavar="TEMPLATE", choices=sorted(TEMPLATES),
+                   help=HELP["search_templates"])
     p.add_argument("--resume", action="store_true", help="go on from the last file written")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=_run_harden)

@@ -4,6 +4,9 @@ Round r (1 ... R) starts from the planner of round r - 1 (round 0: `--checkpoint
 
     RUN/round_r/attack/     CRASH (MAM+ASM) against it on the training scenes (`adversary attack`)
     RUN/round_r/windows/    each successful attack as training windows (`adversary.harden.windows`)
+    RUN/round_r/search/     with --search-templates: NSGA-II (`adversary search`) against it, one
+                            run per template; every collided scenario as windows too
+                            (`adversary.harden.search_windows`, shards search_<template>_<key>)
     RUN/round_r/data/       those of rounds 1 ... r mixed with natural windows (`adversary.harden.dataset`)
     RUN/round_r/train/      `riskmap train` from round r - 1's weights on that data
     RUN/round_r/planner.*   its last epoch, with the original's sampler and planning settings (the round's planner)
@@ -65,11 +68,15 @@ class HardenConfig:
     selector_model: str | None = None    # default: checkpoints/crash_selector_<family>
     workers: int = 1
     batch_size: int = 8              # scenes optimised together in an attack
+    search_templates: tuple[str, ...] = ()   # NSGA-II templates searched each round; (): CRASH only
+    search_pop: int = 12             # evaluations per generation of a round's search
+    search_gen: int = 6              # its generations (budget pop × gen per template)
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "natural_commonroad", tuple(self.natural_commonroad))
+        object.__setattr__(self, "search_templates", tuple(self.search_templates))
         for name in ("rounds", "count", "epochs", "eval_count", "natural_episodes", "workers", "batch_size",
-                     "replan_every"):
+                     "replan_every", "search_pop", "search_gen"):
             if getattr(self, name) < 1:
                 raise InputError(f"--{name.replace('_', '-')} must be at least 1")
         if not 0.0 <= self.natural_share < 1.0:
@@ -82,6 +89,10 @@ class HardenConfig:
             raise InputError(f"--demonstration {self.demonstration!r} must be one of {', '.join(DEMONSTRATIONS)}")
         if not 0 < self.lr < float("inf"):
             raise InputError(f"--lr must be a positive number, got {self.lr}")
+        from adversary.search.scenarios import get_template
+
+        for template in self.search_templates:
+            get_template(template)
 
 
 def round_dir(out: Path, r: int) -> Path:
@@ -148,6 +159,44 @@ def attack_windows(config: HardenConfig, r: int, progress: bool) -> list[Path]:
             print(f"round {r}: {path.stem}: {len(made.scenes)} windows ({made.info.get('demonstration')})",
                   flush=True)
     return shards
+
+
+def search_windows(config: HardenConfig, r: int, progress: bool) -> tuple[list[Path], dict]:
+    """Round r's searches against round r - 1's planner (ROUND/search/<template>, seed: the run's
+    + r, so never the judgement's) and each collided scenario as a window shard
+    (ROUND/windows/search_<template>_<key>); returns the shards and, per template, how many
+    scenarios were evaluated and collided."""
+    import numpy as np
+
+    from adversary.harden.dataset import write_attack_shard
+    from adversary.harden.search_windows import search_failure_windows
+    from adversary.harden.windows import HardenWindowConfig
+    from adversary.search.guard_data import read_search_run
+    from adversary.search.run import SearchConfig, search
+
+    here = round_dir(config.out, r)
+    shards, found = [], {}
+    for template in config.search_templates:
+        out = here / "search" / template
+        if not (out / "summary.json").exists():
+            search(SearchConfig(planner=planner_spec(config, r - 1), template=template, pop=config.search_pop,
+                                gen=config.search_gen, seed=config.seed + r, workers=config.workers),
+                   out, resume=out.exists(), progress=progress, frames=False)
+        settings, paths = read_search_run(out)
+        records = [(path, json.loads(path.read_text())) for path in paths]
+        failures = [(path, record) for path, record in records if record.get("feasible") and record.get("collided")]
+        found[template] = {"evaluations": len(records), "collisions": len(failures)}
+        for path, record in failures:
+            shard = here / "windows" / f"search_{template}_{path.stem}"
+            shards.append(shard)
+            if shard.with_suffix(".json").exists():
+                continue
+            made = search_failure_windows(settings, np.asarray(record["x"], dtype=np.float64),
+                                          HardenWindowConfig(choice=config.demonstration))
+            write_attack_shard(shard, made.scenes, {**made.info, "search": str(path)})
+            if progress and made.scenes:
+                print(f"round {r}: search {template} {path.stem}: {len(made.scenes)} windows", flush=True)
+    return shards, found
 
 
 def fine_tune(config: HardenConfig, r: int, shards: list[Path], progress: bool) -> dict:
@@ -274,7 +323,11 @@ def judge_round(config: HardenConfig, r: int, progress: bool) -> dict:
 
 
 def _settings(config: HardenConfig) -> dict:
-    return asdict(config) | {"out": str(config.out)}
+    settings = asdict(config) | {"out": str(config.out)}
+    if not config.search_templates:        # runs from before the search option resume as they were
+        for name in ("search_templates", "search_pop", "search_gen"):
+            settings.pop(name)
+    return settings
 
 
 def harden(config: HardenConfig, resume: bool = False, progress: bool = True) -> dict:
@@ -320,8 +373,13 @@ def harden(config: HardenConfig, resume: bool = False, progress: bool = True) ->
             print(f"round {r}: attacking {planner_spec(config, r - 1)} on {config.count} training scenes", flush=True)
         trained = attack(config, r - 1, Path(config.scenes), config.count, here / "attack", progress)["summary"]
         shards = attack_windows(config, r, progress)
+        searched = {}
+        if config.search_templates:
+            more, searched = search_windows(config, r, progress)
+            shards += more
         tuned = fine_tune(config, r, shards, progress)
-        commit({"round": r, "planner": planner_spec(config, r), "training_attack": trained, **tuned,
+        commit({"round": r, "planner": planner_spec(config, r), "training_attack": trained,
+                **({"training_search": searched} if searched else {}), **tuned,
                 "judged": judge_round(config, r, progress)})
     return summary
 

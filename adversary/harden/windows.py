@@ -106,9 +106,53 @@ def attacked_drive(record: SceneRecord, attack: dict, planner, planner_spec: str
     return states, valid, np.concatenate([log.sizes[others], log.sizes[log.ego_id:log.ego_id + 1]]), others
 
 
-def _lane_width_m(record: SceneRecord) -> float:
-    lanes = record.window.lanes
+def _lane_width_m(lanes) -> float:
     return float(np.median([lane.width_m for lane in lanes])) if lanes else 4.0
+
+
+def clear_alternative(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, ego: int, adversary: int,
+                      dt_s: float, lanes, config: HardenWindowConfig, from_step: int = 0,
+                      ) -> tuple[np.ndarray | None, dict]:
+    """Steps 1 and 2 of the module docstring on a drive's arrays (states [A, S, 6], valid [A, S],
+    sizes [A, 2]; agent `ego` collided with agent `adversary` at or after `from_step`; `lanes`
+    the road's): the collision-free ego [S + future, 6] from the drive's steps 0 ... S - 1 on, and
+    how it was found, or (None, why); info["collision_step"] is absent only if they never touch."""
+    k_c, _, _ = _first_collision_arrays(states, valid, sizes, ego, [adversary], from_step)
+    if k_c is None:
+        return None, {"why": "the attacked drive no longer collides with the adversary"}
+    end = states.shape[1] - 1
+    start = max(1, k_c - round(config.lookback_s / dt_s))
+    extra = round(WINDOW_FUTURE_S / dt_s)
+    area = drivable_area(lanes)
+
+    def on_road(centre, heading, length, width):
+        return not box_off_road(np.array([*centre, *heading]), (length, width), area)
+
+    lane = _lane_width_m(lanes)
+    if config.choice in ("safest", "defensive", "lateral"):     # whichever keeps most room
+        keep = (lambda a: a <= 0.0) if config.choice == "defensive" else (lambda a: True)
+        along = tuple(a for a in config.accels_mps2 if keep(a))
+        sideways = tuple(a for a in config.lateral_accels_mps2 if keep(a))
+
+        def along_path():
+            return safest_clear_alternative(states, valid, sizes, ego, start, end, dt_s, along)
+
+        def to_the_side():
+            return safest_clear_alternative(states, valid, sizes, ego, start, end, dt_s, sideways, (lane, -lane),
+                                            on_road=on_road)
+
+        found = (to_the_side() or along_path()) if config.choice == "lateral" else (along_path() or to_the_side())
+    else:
+        found = first_clear_alternative(states, valid, sizes, ego, start, end, dt_s, config.accels_mps2) or \
+            first_clear_alternative(states, valid, sizes, ego, start, end, dt_s, config.lateral_accels_mps2,
+                                    (lane, -lane), on_road=on_road)
+    info = {"collision_step": int(k_c), "start_step": int(start), "end_step": int(end)}
+    if found is None:
+        return None, {**info, "why": "no alternative is clear"}
+    accel, offset = found
+    after = alternative_track(states, valid, ego, start, end - start + extra, dt_s, accel, offset, path_until=end)
+    full = np.concatenate([states[ego, :start + 1], after])
+    return full, {**info, "demonstration": "alternative", "accel_mps2": accel, "offset_m": offset}
 
 
 def counterfactual_ego(record: SceneRecord, attack: dict, planner, planner_spec: str,
@@ -119,44 +163,12 @@ def counterfactual_ego(record: SceneRecord, attack: dict, planner, planner_spec:
     ego = len(others)
     adversary = others.index(int(record.agent_ids[attack["adversary_row"]]))
     dt = record.log.dt_s
-    k_c, _, _ = _first_collision_arrays(states, valid, sizes, ego, [adversary], record.t0_step)
-    if k_c is None:
-        return None, {"why": "the attacked drive no longer collides with the adversary"}
-    end = states.shape[1] - 1
-    start = max(1, k_c - round(config.lookback_s / dt))
-    extra = round(WINDOW_FUTURE_S / dt)
-    area = drivable_area(record.window.lanes)
-
-    def on_road(centre, heading, length, width):
-        return not box_off_road(np.array([*centre, *heading]), (length, width), area)
-
-    lane = _lane_width_m(record)
-    if config.choice in ("safest", "defensive", "lateral"):     # whichever keeps most room
-        keep = (lambda a: a <= 0.0) if config.choice == "defensive" else (lambda a: True)
-        along = tuple(a for a in config.accels_mps2 if keep(a))
-        sideways = tuple(a for a in config.lateral_accels_mps2 if keep(a))
-
-        def along_path():
-            return safest_clear_alternative(states, valid, sizes, ego, start, end, dt, along)
-
-        def to_the_side():
-            return safest_clear_alternative(states, valid, sizes, ego, start, end, dt, sideways, (lane, -lane),
-                                            on_road=on_road)
-
-        found = (to_the_side() or along_path()) if config.choice == "lateral" else (along_path() or to_the_side())
-    else:
-        found = first_clear_alternative(states, valid, sizes, ego, start, end, dt, config.accels_mps2) or \
-            first_clear_alternative(states, valid, sizes, ego, start, end, dt, config.lateral_accels_mps2,
-                                    (lane, -lane), on_road=on_road)
-    info = {"collision_step": int(k_c), "start_step": int(start), "end_step": int(end)}
-    if found is not None:
-        accel, offset = found
-        after = alternative_track(states, valid, ego, start, end - start + extra, dt, accel, offset,
-                                  path_until=end)
-        full = np.concatenate([states[ego, :start + 1], after])
-        return full, {**info, "demonstration": "alternative", "accel_mps2": accel, "offset_m": offset}
-    if not config.human_fallback:
-        return None, {**info, "why": "no alternative is clear"}
+    full, info = clear_alternative(states, valid, sizes, ego, adversary, dt, record.window.lanes, config,
+                                   from_step=record.t0_step)
+    if full is not None or "collision_step" not in info or not config.human_fallback:
+        return full, info
+    info = {k: v for k, v in info.items() if k != "why"}
+    end, extra = info["end_step"], round(WINDOW_FUTURE_S / dt)
     human = splice_tracks(record, np.asarray(attack["tracks"]), attack["metrics"]["spliced_rows"])
     mine = human.states[human.ego_id, :end + 1]
     if not human.valid[human.ego_id, :end + 1].all():

@@ -86,9 +86,9 @@ class Trajectory:
 
 def run_scenario(template: Template, values: np.ndarray, config: EvaluationConfig,
                  frames_dir: Path | None = None, on_step=None, on_reset=None,
-                 wrap_planner=None) -> tuple[dict, Trajectory]:
+                 wrap_planner=None, on_ready: tuple = ()) -> tuple[dict, Trajectory]:
     """Drive one scenario; returns the drive record and the trajectories of ego and target.
-    on_reset, on_step: extra `DriveHooks` callbacks (observers); wrap_planner(planner) -> the
+    on_reset, on_step, on_ready: extra `DriveHooks` callbacks; wrap_planner(planner) -> the
     planner that drives (e.g. one that keeps its last plan)."""
     from riskmap.sim.rollout import DriveConfig, DriveHooks, drive_episode
 
@@ -121,8 +121,8 @@ def run_scenario(template: Template, values: np.ndarray, config: EvaluationConfi
         from riskmap.figures.panels import plan_frame_writer
 
         frames = plan_frame_writer(frames_dir, planner, "episode_000000", f"{ENV_ID} episode 0")
-    hooks = DriveHooks(setup=setup, on_reset=on_reset, perceive=scenario.perceive, on_plan=frames,
-                       on_step=log)
+    hooks = DriveHooks(setup=setup, on_reset=on_reset, on_ready=tuple(on_ready), perceive=scenario.perceive,
+                       on_plan=frames, on_step=log)
     record = drive_episode(env, planner, drive_config, 0, hooks)
     return record, trajectory
 
