@@ -15,8 +15,9 @@ from riskmap.infra.atomic import atomic_write
 from riskmap.infra.stats import wilson
 
 PANEL_CANDIDATES = 80      # attack windows searched for the before/after panel
-COLUMNS = ("round", "fresh CRASH on held-out scenes [95% CI]", "training attacks won", "attack windows",
-           "natural collisions", "natural progress (m)", "open-loop ADE (m)")
+COLUMNS = ("round", "fresh CRASH on held-out scenes [95% CI]", "training attacks won",
+           "training search failures", "adversarial windows", "natural collisions", "natural progress (m)",
+           "open-loop ADE (m)")
 
 
 def _rate(hits: int | None, n: int | None) -> str:
@@ -32,9 +33,11 @@ def round_row(entry: dict) -> tuple[str, ...]:
     trained = entry.get("training_attack") or {}
     natural = judged.get("closed_loop") or {}
     ade = (judged.get("open_loop") or {}).get("ade_m", {}).get("mean")
-    windows = (entry.get("data") or {}).get("attack_windows")
+    windows = (entry.get("data") or {}).get("attack_windows")      # CRASH's and the search's
+    searched = entry.get("training_search") or {}
     return (str(entry["round"]), _rate(fresh.get("collisions"), fresh.get("scenes")),
             _rate(trained.get("collisions"), trained.get("scenes")) if trained else "–",
+            "; ".join(f"{t} {v['collisions']}/{v['evaluations']}" for t, v in sorted(searched.items())) or "–",
             "–" if windows is None else str(windows),
             _rate(natural.get("collisions"), natural.get("episodes")),
             "–" if natural.get("distance_m") is None else f"{natural['distance_m']:.1f}",
