@@ -199,6 +199,13 @@ def search_windows(config: HardenConfig, r: int, progress: bool) -> tuple[list[P
     return shards, found
 
 
+def earlier_shards(out: Path, r: int) -> list[Path]:
+    """The window shards rounds 1 ... r - 1 wrote (ROUND/windows/<name>, committed: .json there),
+    round by round: a round trains on every attack so far, not only on its own."""
+    return [path.with_suffix("") for k in range(1, r)
+            for path in sorted((round_dir(out, k) / "windows").glob("*.json"))]
+
+
 def fine_tune(config: HardenConfig, r: int, shards: list[Path], progress: bool) -> dict:
     """Round r's training: round r - 1's weights on the mixed data; the last epoch becomes the
     round's planner, with the original checkpoint's planning settings."""
@@ -372,7 +379,7 @@ def harden(config: HardenConfig, resume: bool = False, progress: bool = True) ->
         if progress:
             print(f"round {r}: attacking {planner_spec(config, r - 1)} on {config.count} training scenes", flush=True)
         trained = attack(config, r - 1, Path(config.scenes), config.count, here / "attack", progress)["summary"]
-        shards = attack_windows(config, r, progress)
+        shards = earlier_shards(out, r) + attack_windows(config, r, progress)
         searched = {}
         if config.search_templates:
             more, searched = search_windows(config, r, progress)

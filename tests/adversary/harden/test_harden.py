@@ -246,3 +246,16 @@ def test_report_needs_a_run(tmp_path, capsys):
     (tmp_path / "harden.json").write_text(json.dumps({"checkpoint": "x"}))
     assert adversary_main(["harden-report", str(tmp_path)]) == 0
     assert "Hardening rounds" in (tmp_path / "report.html").read_text()
+
+
+def test_a_round_trains_on_the_windows_of_every_earlier_round_too(tmp_path):
+    from adversary.harden.loop import earlier_shards
+
+    for name in ("round_1/windows/scene_00002", "round_1/windows/search_cut_in_ab", "round_2/windows/scene_00007"):
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).with_suffix(".json").write_text("{}")
+    (tmp_path / "round_2/windows/scene_00009.npz").write_bytes(b"")       # not committed: no .json
+    assert earlier_shards(tmp_path, 1) == []
+    assert earlier_shards(tmp_path, 3) == [tmp_path / "round_1/windows/scene_00002",
+                                           tmp_path / "round_1/windows/search_cut_in_ab",
+                                           tmp_path / "round_2/windows/scene_00007"]
