@@ -161,7 +161,7 @@ def attack_windows(config: HardenConfig, r: int, progress: bool) -> list[Path]:
     return shards
 
 
-def search_windows(config: HardenConfig, r: int, progress: bool) -> tuple[list[Path], dict]:
+def round_search_windows(config: HardenConfig, r: int, progress: bool) -> tuple[list[Path], dict]:
     """Round r's searches against round r - 1's planner (ROUND/search/<template>, seed: the run's
     + r, so never the judgement's) and each collided scenario as a window shard
     (ROUND/windows/search_<template>_<key>); returns the shards and, per template, how many
@@ -382,7 +382,7 @@ def harden(config: HardenConfig, resume: bool = False, progress: bool = True) ->
         shards = earlier_shards(out, r) + attack_windows(config, r, progress)
         searched = {}
         if config.search_templates:
-            more, searched = search_windows(config, r, progress)
+            more, searched = round_search_windows(config, r, progress)
             shards += more
         tuned = fine_tune(config, r, shards, progress)
         commit({"round": r, "planner": planner_spec(config, r), "training_attack": trained,

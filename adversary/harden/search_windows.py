@@ -25,6 +25,7 @@ import numpy as np
 from adversary.crash.judge import WINDOW_FUTURE_S, WINDOW_HISTORY_S, _no_contact_response
 from adversary.crash.scenes import WINDOW_DT_S
 from adversary.harden.windows import (
+    NO_HISTORY,
     HardenWindowConfig,
     HardenWindows,
     _first_collision_arrays,
@@ -64,9 +65,9 @@ def search_failure_windows(search_config: dict, values: np.ndarray,
     """The training windows of one search evaluation (module docstring): `search_config` is the
     search's run.json "config", `values` the evaluation's parameter vector ("x"); `config` by
     default `HardenWindowConfig()`."""
-    config = config or HardenWindowConfig()
     from adversary.search.scenarios import ENV_ID
 
+    config = config or HardenWindowConfig()
     values = np.asarray(values, dtype=np.float64)
     _, recorder = _drive(search_config, values)
     states, valid, sizes, _ = recorder.arrays()
@@ -82,13 +83,15 @@ def search_failure_windows(search_config: dict, values: np.ndarray,
     ego_full, info = clear_alternative(states, valid, sizes, ego, target, dt, lanes, config)
     if ego_full is None:
         return HardenWindows((), {**info, "windows": 0})
+    steps = window_steps(info, config, dt, recorder.num_steps - 1)
+    if not steps:
+        return HardenWindows((), {**info, "windows": 0, "why": NO_HISTORY})
     _, again = _drive(search_config, values, wrap_planner=lambda _: _following(ego_full, sizes[ego], dt))
     states, valid, sizes, _ = again.arrays()
     hit, _, _ = _first_collision_arrays(states, valid, sizes, again.ego_id,
                                         [a for a in range(len(sizes)) if a != again.ego_id], 0)
     if hit is not None:
         return HardenWindows((), {**info, "windows": 0, "why": f"the alternative's drive collides at step {hit}"})
-    steps = window_steps(info, config, dt, again.num_steps - 1)
     scenes = tuple(with_demonstrated_future(again.scene(k, WINDOW_HISTORY_S, WINDOW_FUTURE_S, WINDOW_DT_S,
                                                         source=ENV_ID), ego_full, k, dt) for k in steps)
     return HardenWindows(scenes, {**info, "windows": len(scenes), "steps": list(steps)})

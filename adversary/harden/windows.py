@@ -193,6 +193,9 @@ def _first_collision_arrays(states, valid, sizes, ego, others, from_step):
     return _first_collision(SimpleNamespace(states=states, valid=valid, sizes=sizes), ego, others, from_step)
 
 
+NO_HISTORY = f"the collision comes before a window's {WINDOW_HISTORY_S:g} s of history"
+
+
 def window_steps(info: dict, config: HardenWindowConfig, dt_s: float, last_step: int) -> tuple[int, ...]:
     """The 10 Hz steps windows are cut at: every `stride_s` from `before_s` before the alternative
     starts (never before the window's history fits) to the collision step."""
@@ -231,6 +234,8 @@ def hardening_windows(record: SceneRecord, attack: dict, planner, planner_spec: 
     if ego_full is None:
         return HardenWindows((), {**info, "windows": 0})
     steps = window_steps(info, config, record.log.dt_s, record.log.num_steps - 1)
+    if not steps:
+        return HardenWindows((), {**info, "windows": 0, "why": NO_HISTORY})
     replay = ReplayPlanner()
     # Recorded scenes route the windows as the planner under attack is routed (its training rule).
     replay.route_settings = getattr(planner, "route_settings", None)

@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from adversary.harden.loop import HardenConfig, search_windows
+from adversary.harden.loop import HardenConfig, round_search_windows
 from adversary.harden.search_windows import _drive, search_failure_windows
 from adversary.search.scenarios import get_template
 from rasterize.errors import InputError
@@ -57,10 +57,19 @@ def test_a_scenario_that_does_not_collide_gives_no_windows():
 
 
 @pytest.mark.slow
+def test_a_collision_before_two_seconds_of_history_gives_no_windows_and_says_why():
+    # cutting in 3 m ahead at 0.5 s, 8 m/s slower: contact at about 0.9 s, before any window fits
+    made = search_failure_windows(CV_CUT_IN, _cut_in(gap_m=3.0, rel_speed_mps=-8.0, manoeuvre_time_s=0.5,
+                                                     brake_mps2=6.0))
+    assert made.scenes == () and made.info["collision_step"] < 20
+    assert made.info["why"] == "the collision comes before a window's 2 s of history"
+
+
+@pytest.mark.slow
 def test_a_round_searches_the_current_planner_and_resumes_without_redoing(tmp_path):
     config = HardenConfig(checkpoint="checkpoints/riskmap_highway", scenes="unused", natural="unused",
                           out=str(tmp_path), search_templates=("cut_in",), search_pop=4, search_gen=1)
-    shards, found = search_windows(config, 1, progress=False)
+    shards, found = round_search_windows(config, 1, progress=False)
     records = [json.loads(p.read_text()) for p in sorted((tmp_path / "round_1/search/cut_in/evaluations").glob("*.json"))]
     assert json.loads((tmp_path / "round_1/search/cut_in/run.json").read_text())["config"]["seed"] == 1
     assert found == {"cut_in": {"evaluations": len(records),
@@ -69,7 +78,7 @@ def test_a_round_searches_the_current_planner_and_resumes_without_redoing(tmp_pa
     assert all(s.with_suffix(".json").exists() for s in shards)
     assert sum(json.loads(s.with_suffix(".json").read_text())["windows"] for s in shards) > 0
     written = {s: s.with_suffix(".json").stat().st_mtime_ns for s in shards}
-    assert search_windows(config, 1, progress=False) == (shards, found)
+    assert round_search_windows(config, 1, progress=False) == (shards, found)
     assert {s: s.with_suffix(".json").stat().st_mtime_ns for s in shards} == written
 
 
