@@ -60,6 +60,10 @@ def _following(ego_states: np.ndarray, size: np.ndarray, dt_s: float) -> ReplayP
     return replay
 
 
+def _others(sizes: np.ndarray, ego: int) -> list[int]:
+    return [a for a in range(len(sizes)) if a != ego]
+
+
 def search_failure_windows(search_config: dict, values: np.ndarray,
                            config: HardenWindowConfig | None = None) -> HardenWindows:
     """The training windows of one search evaluation (module docstring): `search_config` is the
@@ -72,14 +76,11 @@ def search_failure_windows(search_config: dict, values: np.ndarray,
     _, recorder = _drive(search_config, values)
     states, valid, sizes, _ = recorder.arrays()
     ego = recorder.ego_id
-    targets = [a for a in range(len(sizes)) if a != ego]
     dt = recorder.dt_s
     lanes = recorder.scene(recorder.num_steps - 1, 0.0, 0.0, source=ENV_ID).lanes
-    hits = [(k, a) for a in targets
-            for k in [_first_collision_arrays(states, valid, sizes, ego, [a], 0)[0]] if k is not None]
-    if not hits:
+    hit, target, _ = _first_collision_arrays(states, valid, sizes, ego, _others(sizes, ego), 0)
+    if hit is None:
         return HardenWindows((), {"windows": 0, "why": "the search's drive does not collide"})
-    _, target = min(hits)
     ego_full, info = clear_alternative(states, valid, sizes, ego, target, dt, lanes, config)
     if ego_full is None:
         return HardenWindows((), {**info, "windows": 0})
@@ -88,8 +89,7 @@ def search_failure_windows(search_config: dict, values: np.ndarray,
         return HardenWindows((), {**info, "windows": 0, "why": NO_HISTORY})
     _, again = _drive(search_config, values, wrap_planner=lambda _: _following(ego_full, sizes[ego], dt))
     states, valid, sizes, _ = again.arrays()
-    hit, _, _ = _first_collision_arrays(states, valid, sizes, again.ego_id,
-                                        [a for a in range(len(sizes)) if a != again.ego_id], 0)
+    hit, _, _ = _first_collision_arrays(states, valid, sizes, again.ego_id, _others(sizes, again.ego_id), 0)
     if hit is not None:
         return HardenWindows((), {**info, "windows": 0, "why": f"the alternative's drive collides at step {hit}"})
     scenes = tuple(with_demonstrated_future(again.scene(k, WINDOW_HISTORY_S, WINDOW_FUTURE_S, WINDOW_DT_S,
