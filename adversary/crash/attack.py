@@ -37,10 +37,22 @@ from adversary.crash.traffic_model import states_of
 from rasterize.errors import InputError
 
 
+CONTROL_HZ = 10                         # every attack drive's control rate (the records' 10 Hz)
+
+
+def replan_hz_of(attack: dict) -> int:
+    """The replanning rate an attack record's drives used (records from before `replan_hz`
+    existed: 2 Hz), so that driving it again reproduces it."""
+    return int(attack.get("config", {}).get("replan_hz", AttackConfig.replan_hz))
+
+
 @dataclass(frozen=True)
 class AttackConfig:
     selector: str = "crash"
     replan_every: int = 20              # k (closed-loop planners)
+    replan_hz: int = 2                  # how often the ego under test replans in every drive (Hz,
+                                        # a divisor of the 10 Hz control rate; 2 is the planner
+                                        # paper's step and every drive's default)
     iterations_replay: int = 300        # CRASH / STRIVE
     iterations_closed_loop: int = 200
     lr: float = 0.15                    # Adam's step on the latents: 0.15 beat 0.05 on every family
@@ -53,6 +65,9 @@ class AttackConfig:
             raise InputError(f"selector {self.selector!r} is unknown; use one of {', '.join(SELECTORS)}")
         if self.replan_every < 1:
             raise InputError(f"replan_every (k) must be >= 1, got {self.replan_every}")
+        if self.replan_hz < 1 or CONTROL_HZ % self.replan_hz:
+            raise InputError(f"--replan-hz {self.replan_hz}: must divide the {CONTROL_HZ} Hz control "
+                             "rate (1, 2, 5 or 10)")
         if not (self.lr > 0 and self.lr < float("inf")):
             raise InputError(f"--lr {self.lr}: must be a positive number")
         if self.time_weighting not in TIME_WEIGHTINGS:
@@ -143,7 +158,7 @@ def attack_records(records: list, models: Models, planner, planner_spec: str, co
         n = items[i].num_agents
         tracks = np.zeros((0, 12, 6)) if traj is None else world_tracks(items[i], traj[:n])[1:]
         result = rollout(records[i], tracks, items[i].rows[1:] if traj is not None else [], planner,
-                         planner_spec, keep_scene=keep_scene)
+                         planner_spec, replan_hz=config.replan_hz, keep_scene=keep_scene)
         timing[i]["rollout_s"] += time.perf_counter() - t
         timing[i]["rollouts"] += 1
         return tracks, result

@@ -113,7 +113,7 @@ def _run_attack(args: argparse.Namespace) -> int:
                           iterations_replay=args.iterations or 300,
                           iterations_closed_loop=args.iterations or 200,
                           stop_on_collision=not args.full_iterations, lr=args.lr or AttackConfig.lr,
-                          time_weighting=args.time_weighting)
+                          time_weighting=args.time_weighting, replan_hz=args.replan_hz)
     needs_selector = args.selector in ("crash", "crash-no-mam")
     traffic, selectors = default_models(Path(args.scenes), args.traffic_model, args.selector_model)
     summary = run_attacks(args.planner, Path(args.scenes), args.count, config, args.seed, Path(args.out),
@@ -187,6 +187,8 @@ def add_attack_parsers(subparsers) -> None:
     p.add_argument("--selector-model", default=None,
                    help="directory with selector_mam / selector_no_mam (default: checkpoints/crash_selector_<family>)")
     p.add_argument("--replan-every", type=positive_int, default=20, help="k: planner re-runs every k iterations")
+    p.add_argument("--replan-hz", type=positive_int, default=2,
+                   help="how often the ego under test replans in its drives (Hz; 1, 2, 5 or 10; default 2)")
     p.add_argument("--iterations", type=non_negative_int, default=0,
                    help="0: 300 for replay, 200 for a closed-loop planner")
     p.add_argument("--full-iterations", action="store_true", help="do not stop at the first collision")

@@ -161,12 +161,13 @@ def contact_onset(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, ego:
 def rollout_windows(record, attack: dict, planner, config: GuardCollectConfig, rng: np.random.Generator,
                     cut_at: str = "contact") -> tuple[dict[str, np.ndarray] | None, dict]:
     """(windows as `extract_windows`, meta) of one attack record; windows None when skipped."""
+    from adversary.crash.attack import replan_hz_of
     from adversary.crash.judge import judge, rollout
 
     tracks = np.asarray(attack["tracks"], dtype=np.float64)
     rows = attack["metrics"]["spliced_rows"]
     adv_row = int(attack["adversary_row"])
-    result = rollout(record, tracks, rows, planner, attack["planner"])
+    result = rollout(record, tracks, rows, planner, attack["planner"], replan_hz=replan_hz_of(attack))
     metrics = judge(record, tracks, rows, adv_row, planner, attack["planner"], result=result)
     adversary = int(result.row_ids(record)[adv_row])
     meta = {"adversary_collision": bool(metrics["collision"]), "collision_time_s": metrics["collision_time_s"],

@@ -38,6 +38,7 @@ from adversary.crash.judge import (
     rollout,
     splice_tracks,
 )
+from adversary.crash.attack import replan_hz_of
 from adversary.crash.scenes import WINDOW_DT_S, SceneRecord
 from adversary.crash.solution import alternative_track, first_clear_alternative, safest_clear_alternative
 from rasterize.errors import InputError
@@ -95,7 +96,7 @@ def attacked_drive(record: SceneRecord, attack: dict, planner, planner_spec: str
     if attack.get("ego_states") is not None:
         ego = np.asarray(attack["ego_states"], dtype=np.float64)
     else:
-        drove = rollout(record, tracks, rows, planner, planner_spec)
+        drove = rollout(record, tracks, rows, planner, planner_spec, replan_hz=replan_hz_of(attack))
         ego = drove.states[drove.ego][drove.valid[drove.ego]]
     # Both drives start from the episode's reset state; the record's rounding must not move it.
     ego[0] = log.states[log.ego_id, 0]

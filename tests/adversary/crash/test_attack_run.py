@@ -81,3 +81,28 @@ def test_summary_counts_every_scene_in_the_denominator():
     s = summarise([ok, miss])
     assert s["collision_rate"] == 0.5 and s["no_candidate"] == 1 and s["other_off_road_rate"] == 1.0
     assert s["collision_types"] == {"cut-in": 1} and s["solution_rate"] == 1.0
+
+
+def test_replan_hz_reaches_every_drive_and_the_default_keeps_old_run_json(scenes, tmp_path, monkeypatch):
+    from adversary.crash import judge
+    from adversary.crash.attack import replan_hz_of
+
+    seen = []
+    real = judge.rollout
+
+    def spy(*args, **kwargs):
+        seen.append(kwargs.get("replan_hz"))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(judge, "rollout", spy)
+    config = AttackConfig(selector="distance", iterations_closed_loop=4, replan_every=2, replan_hz=10)
+    run_attacks("idm", scenes, 1, config, 0, tmp_path / "fast", TRAFFIC, None, progress=False)
+    assert len(seen) >= 2 and set(seen) == {10}            # the first drive, replans, the judged drive
+    record = json.loads((tmp_path / "fast" / "attacks" / "scene_00001.json").read_text())
+    assert replan_hz_of(record) == 10 and replan_hz_of({"config": {}}) == 2
+    assert json.loads((tmp_path / "fast" / "run.json").read_text())["config"]["replan_hz"] == 10
+    run_attacks("idm", scenes, 1, AttackConfig(selector="distance", iterations_closed_loop=4),
+                0, tmp_path / "default", TRAFFIC, None, progress=False)
+    assert "replan_hz" not in json.loads((tmp_path / "default" / "run.json").read_text())["config"]
+    with pytest.raises(InputError, match="must divide the 10 Hz"):
+        AttackConfig(replan_hz=3)
