@@ -43,7 +43,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
         evaluate_commonroad(args.commonroad, planners, Path(args.out), seed=args.seed,
                             resume=args.resume, progress=not args.quiet, workers=args.workers,
                             goal=args.goal or "route", mode=args.mode,
-                            goal_variance=args.goal_variance)
+                            goal_variance=args.goal_variance, replan_hz=args.replan_hz)
         print((Path(args.out) / "table.md").read_text(), end="")
         return 0
     if args.goal is not None or args.goal_variance is not None:
@@ -52,7 +52,7 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     if not args.env or not args.episodes:
         raise InputError("evaluate needs --env ENV and --episodes N (or --commonroad FILES)")
     config = EvalConfig(env_id=args.env, planners=planners, episodes=args.episodes, seed=args.seed,
-                        mode=args.mode, episode_s=args.episode_s)
+                        mode=args.mode, episode_s=args.episode_s, replan_hz=args.replan_hz)
     evaluate(config, Path(args.out), workers=args.workers, resume=args.resume,
              progress=not args.quiet)
     print((Path(args.out) / "table.md").read_text(), end="")
@@ -153,6 +153,8 @@ def add_parsers(sub) -> None:
                         "(with --commonroad: the recorded paths, braking for the ego)")
     p.add_argument("--episode-s", type=float, default=None,
                    help="simulated seconds per episode (default: the family's length)")
+    p.add_argument("--replan-hz", type=positive_int, default=2,
+                   help="how often planners replan (Hz; a divisor of the 10 Hz control rate; default 2)")
     p.add_argument("--out", required=True)
     p.add_argument("--workers", type=positive_int, default=1, help="processes (default 1)")
     p.add_argument("--resume", action="store_true")

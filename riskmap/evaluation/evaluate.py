@@ -79,6 +79,9 @@ class EvalConfig:
         if self.mode == "reactive" and "replay" in self.planners:
             raise InputError("planner `replay` plays back the record, which reactive traffic no longer "
                              "follows; use it with --mode log only")
+        if self.replan_hz < 1 or self.control_hz % self.replan_hz:
+            raise InputError(f"--replan-hz {self.replan_hz}: must divide the {self.control_hz} Hz "
+                             "control rate")
         if self.episode_s is None:
             object.__setattr__(self, "episode_s", FAMILY_SETUPS[family].episode_s)
         if not 0 < self.episode_s < float("inf"):

@@ -83,11 +83,11 @@ def _run_episode(task: tuple) -> dict:
     from riskmap.sim.commonroad_replay import ReplayConfig, replay_commonroad_episode
 
     torch.set_num_threads(1)          # workers run side by side
-    spec, path, vehicle, seed, goal, mode, goal_variance, out = task
+    spec, path, vehicle, seed, goal, mode, goal_variance, replan_hz, out = task
     traffic = _traffic(path)
     planner = _planner(spec, traffic, vehicle, seed, goal_variance)
     result = replay_commonroad_episode(traffic, vehicle, planner,
-                                       config=ReplayConfig(goal=goal, mode=mode))
+                                       config=ReplayConfig(goal=goal, mode=mode, replan_hz=replan_hz))
     write_json(_episode_path(out, spec, traffic.name, vehicle), result)
     return result
 
@@ -144,17 +144,18 @@ def markdown_table(results: dict) -> str:
 def evaluate_commonroad(recordings: list[str | Path], planners: tuple[str, ...], out: Path,
                         seed: int = 0, resume: bool = False, progress: bool = True,
                         workers: int = 1, goal: str = "route", mode: str = "log",
-                        goal_variance: float | None = None) -> dict:
+                        goal_variance: float | None = None, replan_hz: int = 2) -> dict:
     """Run every planner on every recorded demonstrator (episodes on `workers` processes) towards
     `goal` among others replayed in `mode` (riskmap.sim.commonroad_replay.ReplayConfig: route or
     human; log or reactive); `goal_variance` (cells²) overrides risk-map planners' planning-time
-    goal variance. Returns {planner: summary}."""
+    goal variance; `replan_hz`: how often planners replan (a divisor of the 10 Hz control rate).
+    Returns {planner: summary}."""
     from tqdm import tqdm
 
     from riskmap.sim.commonroad_replay import ReplayConfig
 
     out = Path(out)
-    ReplayConfig(goal=goal, mode=mode)    # validates the goal and mode before any work
+    ReplayConfig(goal=goal, mode=mode, replan_hz=replan_hz)    # validates them before any work
     files = scenario_files(recordings, flag="--commonroad")
     # The recording as it is (no smoothing); a vehicle recorded in several files of one traffic
     # configuration is one episode (the first file's).
@@ -169,12 +170,14 @@ def evaluate_commonroad(recordings: list[str | Path], planners: tuple[str, ...],
         if spec not in ("replay", "idm"):       # these two are made per recorded vehicle
             _planner(spec, None, 0, seed, goal_variance)
     meta = {"recordings": [str(p) for p in files], "planners": list(planners), "seed": seed, "goal": goal,
-            "mode": mode, **({"goal_variance": goal_variance} if goal_variance is not None else {})}
+            "mode": mode, **({"goal_variance": goal_variance} if goal_variance is not None else {}),
+            # named only when not the default, so run.json of runs from before it still resume
+            **({"replan_hz": replan_hz} if replan_hz != ReplayConfig.replan_hz else {})}
     # Records are per planner and episode, so a resumed run may name more (or fewer) planners:
     # the new ones' episodes are driven, the table covers the planners named now.
     claim_out_dir(out, holds="an evaluation", marker="run.json", resume=resume, settings_file="run.json",
                   settings=meta, may_change=("planners",))
-    todo = [(spec, path, vehicle, seed, goal, mode, goal_variance, out) for spec in planners for path, name, vehicle in episodes
+    todo = [(spec, path, vehicle, seed, goal, mode, goal_variance, replan_hz, out) for spec in planners for path, name, vehicle in episodes
             if not (resume and _episode_path(out, spec, name, vehicle).exists())]
     bar = tqdm(total=len(todo), disable=not progress, desc="evaluate recordings")
     for _ in run_parallel(_run_episode, todo, workers):

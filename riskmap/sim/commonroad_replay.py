@@ -84,8 +84,9 @@ class ReplayConfig:
                                       # keep their paths but brake for the ego (`ReactiveTraffic`)
 
     def __post_init__(self) -> None:
-        if self.control_hz % self.replan_hz:
-            raise InputError("control_hz must be a multiple of replan_hz")
+        if self.replan_hz < 1 or self.control_hz % self.replan_hz:
+            raise InputError(f"--replan-hz {self.replan_hz}: must divide the {self.control_hz} Hz "
+                             "control rate")
         if self.goal not in GOALS:
             raise InputError(f"--goal {self.goal!r} is unknown; use one of {', '.join(GOALS)}")
         if self.mode not in MODES:

@@ -129,3 +129,19 @@ def test_log_replay_keeps_agent_ids():
     for agent in replayed:
         steps = np.flatnonzero(valid[agent])
         np.testing.assert_allclose(states[agent, steps, :2], log.states[ids[agent], steps, :2], atol=1e-9)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("hz", [2, 10])
+def test_replan_hz_sets_how_often_the_planner_plans(tmp_path, hz):
+    out = tmp_path / f"hz{hz}"
+    assert main(["evaluate", "--planners", "cv", "--env", ENV, "--episodes", "1", "--seed", "11",
+                 "--episode-s", "2", "--replan-hz", str(hz), "--out", str(out), "--quiet"]) == 0
+    rows = (out / "episodes.csv").read_text().splitlines()
+    record = dict(zip(rows[0].split(","), rows[1].split(",")))
+    assert int(record["plan_calls"]) == 2 * hz             # 2 s of driving
+
+
+def test_replan_hz_must_divide_the_control_rate():
+    with pytest.raises(InputError, match="--replan-hz 3: must divide the 10 Hz"):
+        EvalConfig(ENV, ("cv",), 1, replan_hz=3)

@@ -102,3 +102,17 @@ def test_red_light_violations_are_summed_beside_collisions_with_the_human_refere
     del old["red_light_violations"], old["human_red_light_violations"]   # written before the count
     summary = summarise([record(1, 1), old])
     assert summary["red_light_violations"] is None and "| n/a (n/a) |" in markdown_table({"cv": summary})
+
+
+def test_replan_hz_reaches_every_recorded_episode(tmp_path):
+    calls = {}
+    for hz in (2, 10):
+        evaluate_commonroad([FIXTURES], ("cv",), tmp_path / str(hz), progress=False, replan_hz=hz)
+        calls[hz] = {p.name: json.loads(p.read_text())["plan_calls"]
+                     for p in (tmp_path / str(hz) / "episodes" / "cv").glob("*.json")}
+    assert calls[2] and calls[2].keys() == calls[10].keys()
+    assert all(calls[10][name] >= 4 * calls[2][name] > 0 for name in calls[2])
+    assert "replan_hz" not in json.loads((tmp_path / "2" / "run.json").read_text())   # old runs resume
+    assert json.loads((tmp_path / "10" / "run.json").read_text())["replan_hz"] == 10
+    with pytest.raises(InputError, match="--replan-hz 4: must divide"):
+        evaluate_commonroad([FIXTURES], ("cv",), tmp_path / "bad", progress=False, replan_hz=4)
