@@ -36,7 +36,6 @@ from adversary.crash.selection import (
 from adversary.crash.traffic_model import states_of
 from rasterize.errors import InputError
 
-
 CONTROL_HZ = 10                         # every attack drive's control rate (the records' 10 Hz)
 
 

@@ -29,6 +29,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from adversary.crash.attack import replan_hz_of
 from adversary.crash.judge import (
     SOLUTION_LATERAL_ACCELS_MPS2,
     WINDOW_FUTURE_S,
@@ -38,7 +39,6 @@ from adversary.crash.judge import (
     rollout,
     splice_tracks,
 )
-from adversary.crash.attack import replan_hz_of
 from adversary.crash.scenes import WINDOW_DT_S, SceneRecord
 from adversary.crash.solution import alternative_track, first_clear_alternative, safest_clear_alternative
 from rasterize.errors import InputError
