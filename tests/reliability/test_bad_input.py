@@ -826,6 +826,10 @@ add(
       S("--episode-s")),
     R("evaluate/episode-s-nan", _argv(*EVAL, "--planners", "cv", *E_SIM, "--episode-s", "nan", "--out", OUT),
       S("--episode-s")),
+    R("evaluate/replan-hz-3", _argv(*EVAL, "--planners", "cv", *E_SIM, "--replan-hz", "3", "--out", OUT),
+      S("--replan-hz")),
+    R("evaluate/cr-replan-hz-4", _argv(*EVAL, "--planners", "cv", "--commonroad", lambda fx, t: GOOD_XML,
+                                       "--replan-hz", "4", "--out", OUT), S("--replan-hz")),
     R("evaluate/replay-reactive", _argv(*EVAL, "--planners", "replay", *E_SIM, "--mode", "reactive",
                                         "--out", OUT), S("replay")),
     R("evaluate/out-under-file", _argv(*EVAL, "--planners", "cv", *E_SIM, "--out", under_file),
@@ -1163,6 +1167,7 @@ add(
                "--selector-model", lambda fx, t: fx.checkpoint("crash_traffic_highway").parent, selector="crash"),
     attack_row("iterations-negative", SC(), S("--iterations"), "--iterations", "-1", usage=True),
     attack_row("panels-negative", SC(), S("--panels"), "--panels", "-1", usage=True),
+    attack_row("replan-hz-3", SC(), S("--replan-hz"), "--replan-hz", "3"),
     attack_row("scenes-is-a-dataset", ds(), S(ds())),
     attack_row("out-under-file", SC(), UNDER_FILE_NAMES, out_arg=under_file, out=under_file),
 )
