@@ -59,13 +59,13 @@ def floor(attacks: dict[str, Path]) -> dict:
     runs = {label: collided_scenes(path) for label, path in attacks.items()}
     common = set.intersection(*(done for done, _ in runs.values()))
     lost_by = {scene: sum(scene in won for _, won in runs.values()) for scene in sorted(common)}
-    return {"runs": {label: {"dir": str(attacks[label]), "won": len(won & common)}
+    return {"runs": {label: {"won": len(won & common)}
                      for label, (_, won) in runs.items()},
             "scenes": len(common), "lost_by": lost_by,
             "lost_by_all": [s for s, n in lost_by.items() if n == len(runs)]}
 
 
-def plot(points: list[dict], lost_by_all: int | None, out: Path) -> None:
+def plot(points: list[dict], result: dict | None, out: Path) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -76,9 +76,9 @@ def plot(points: list[dict], lost_by_all: int | None, out: Path) -> None:
     fig, ax = plt.subplots(figsize=(9, 5.5))
     ax.axvspan(TARGET_PROGRESS_PCT, 12, ymax=(target + 0.5) / (scenes + 1), color="tab:green", alpha=0.15,
                label=f"the target: ≤ {target:g}/{scenes} and progress within 5%")
-    if lost_by_all is not None:
-        ax.axhline(lost_by_all, color="tab:red", ls="--", lw=1,
-                   label=f"scenes every attacked planner lost: {lost_by_all}")
+    if result is not None:
+        ax.axhline(len(result["lost_by_all"]), color="tab:red", ls="--", lw=1,
+                   label=f"scenes all {len(result['runs'])} attacked planners lost: {len(result['lost_by_all'])}")
     for i, group in enumerate(dict.fromkeys(p["group"] for p in points)):
         pts = [p for p in points if p["group"] == group]
         ax.scatter([p["progress_pct"] for p in pts], [p["crash_wins"] for p in pts],
@@ -128,7 +128,7 @@ def main() -> None:
         attacks[label] = Path(path)
     points = read_points(args.points)
     result = floor(attacks) if attacks else None
-    plot(points, None if result is None else len(result["lost_by_all"]), args.out / "frontier.png")
+    plot(points, result, args.out / "frontier.png")
     if result is not None:
         write_json(args.out / "floor.json", result)
     text = markdown(points, result)
