@@ -35,6 +35,7 @@ from adversary.crash.selection import (
 )
 from adversary.crash.traffic_model import states_of
 from rasterize.errors import InputError
+from riskmap.sim.rollout import check_replan_hz
 
 CONTROL_HZ = 10                         # every attack drive's control rate (the records' 10 Hz)
 
@@ -64,9 +65,7 @@ class AttackConfig:
             raise InputError(f"selector {self.selector!r} is unknown; use one of {', '.join(SELECTORS)}")
         if self.replan_every < 1:
             raise InputError(f"replan_every (k) must be >= 1, got {self.replan_every}")
-        if self.replan_hz < 1 or CONTROL_HZ % self.replan_hz:
-            raise InputError(f"--replan-hz {self.replan_hz}: must divide the {CONTROL_HZ} Hz control "
-                             "rate (1, 2, 5 or 10)")
+        check_replan_hz(self.replan_hz, CONTROL_HZ)
         if not (self.lr > 0 and self.lr < float("inf")):
             raise InputError(f"--lr {self.lr}: must be a positive number")
         if self.time_weighting not in TIME_WEIGHTINGS:

@@ -44,6 +44,7 @@ from riskmap.sim.metrics import (
     summarise_metric,
 )
 from riskmap.sim.record import EpisodeRecord, current_names
+from riskmap.sim.rollout import check_replan_hz
 
 MODES = ("log", "reactive")
 # Per-episode values summarised as mean and 90th percentile over episodes.
@@ -79,9 +80,7 @@ class EvalConfig:
         if self.mode == "reactive" and "replay" in self.planners:
             raise InputError("planner `replay` plays back the record, which reactive traffic no longer "
                              "follows; use it with --mode log only")
-        if self.replan_hz < 1 or self.control_hz % self.replan_hz:
-            raise InputError(f"--replan-hz {self.replan_hz}: must divide the {self.control_hz} Hz "
-                             "control rate")
+        check_replan_hz(self.replan_hz, self.control_hz)
         if self.episode_s is None:
             object.__setattr__(self, "episode_s", FAMILY_SETUPS[family].episode_s)
         if not 0 < self.episode_s < float("inf"):

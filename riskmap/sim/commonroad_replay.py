@@ -65,7 +65,7 @@ from riskmap.sim.metrics import (
 from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, Plan
 from riskmap.sim.reactive_traffic import ReactiveTraffic
 from riskmap.sim.record import EpisodeRecord
-from riskmap.sim.rollout import LoopConfig, drive_world
+from riskmap.sim.rollout import LoopConfig, check_replan_hz, drive_world
 
 GOALS = ("route", "human")
 MODES = ("log", "reactive")
@@ -84,9 +84,7 @@ class ReplayConfig:
                                       # keep their paths but brake for the ego (`ReactiveTraffic`)
 
     def __post_init__(self) -> None:
-        if self.replan_hz < 1 or self.control_hz % self.replan_hz:
-            raise InputError(f"--replan-hz {self.replan_hz}: must divide the {self.control_hz} Hz "
-                             "control rate")
+        check_replan_hz(self.replan_hz, self.control_hz)
         if self.goal not in GOALS:
             raise InputError(f"--goal {self.goal!r} is unknown; use one of {', '.join(GOALS)}")
         if self.mode not in MODES:

@@ -40,8 +40,16 @@ class DriveConfig:
         family = family_of_env(self.env_id)
         if self.episode_s is None:
             object.__setattr__(self, "episode_s", FAMILY_SETUPS[family].episode_s)
-        if self.control_hz % self.replan_hz:
-            raise InputError("control_hz must be a multiple of replan_hz")
+        check_replan_hz(self.replan_hz, self.control_hz)
+
+
+def check_replan_hz(replan_hz: int, control_hz: int) -> None:
+    """A planner replans every control_hz / replan_hz control steps, a whole number: InputError
+    (naming --replan-hz, the option every command gives it by) otherwise."""
+    if replan_hz < 1 or control_hz % replan_hz:
+        divisors = ", ".join(str(d) for d in range(1, control_hz + 1) if control_hz % d == 0)
+        raise InputError(f"--replan-hz {replan_hz}: must divide the {control_hz} Hz control rate "
+                         f"({divisors})")
 
 
 @dataclass(frozen=True)
