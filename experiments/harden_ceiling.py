@@ -5,7 +5,7 @@ wins against its progress in natural traffic, and the scenes that every attacked
         --attack original=runs/orig/attack --attack replan_10hz=runs/replan_10hz/attack ... \
         --out experiments/results/harden/ceiling
 
-`--points`: the measured planners, one row each (label, group, crash_wins, crash_scenes,
+`--points` (optional): the measured planners, one row each (label, group, crash_wins, crash_scenes,
 progress_m, section: the experiments/README section whose table holds the row); the first row
 is the original, which progress is measured against.
 `--attack LABEL=DIR`: `adversary attack --out` runs on the same held-out scenes (any planners);
@@ -98,11 +98,13 @@ def plot(points: list[dict], result: dict | None, out: Path) -> None:
 
 
 def markdown(points: list[dict], result: dict | None) -> str:
-    target = TARGET_SHARE * points[0]["crash_wins"]
-    inside = [p["label"] for p in points
-              if p["crash_wins"] <= target and p["progress_pct"] >= TARGET_PROGRESS_PCT]
-    lines = [(f"Planners measured: {len(points)}; inside the target (≤ {target:g} wins, progress ≥ "
-              f"{TARGET_PROGRESS_PCT:g}%): {', '.join(inside) if inside else 'none'}."), ""]
+    lines = []
+    if points:
+        target = TARGET_SHARE * points[0]["crash_wins"]
+        inside = [p["label"] for p in points
+                  if p["crash_wins"] <= target and p["progress_pct"] >= TARGET_PROGRESS_PCT]
+        lines += [(f"Planners measured: {len(points)}; inside the target (≤ {target:g} wins, progress ≥ "
+                   f"{TARGET_PROGRESS_PCT:g}%): {', '.join(inside) if inside else 'none'}."), ""]
     if result is not None:
         lines += [(f"Floor over {len(result['runs'])} attack runs on {result['scenes']} common scenes: "
                    f"{len(result['lost_by_all'])} lost by every run ({', '.join(result['lost_by_all'])})."), "",
@@ -116,7 +118,7 @@ def markdown(points: list[dict], result: dict | None) -> str:
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--points", type=Path, required=True)
+    p.add_argument("--points", type=Path, default=None, help="without it: the floor alone, no figure")
     p.add_argument("--attack", action="append", default=[], metavar="LABEL=DIR")
     p.add_argument("--out", type=Path, default=Path("experiments/results/harden/ceiling"))
     args = p.parse_args()
@@ -126,9 +128,12 @@ def main() -> None:
         if not label or not path:
             raise SystemExit(f"--attack {value!r}: write LABEL=DIR")
         attacks[label] = Path(path)
-    points = read_points(args.points)
+    if args.points is None and not attacks:
+        raise SystemExit("give --points, --attack LABEL=DIR, or both")
+    points = read_points(args.points) if args.points is not None else []
     result = floor(attacks) if attacks else None
-    plot(points, result, args.out / "frontier.png")
+    if points:
+        plot(points, result, args.out / "frontier.png")
     if result is not None:
         write_json(args.out / "floor.json", result)
     text = markdown(points, result)
