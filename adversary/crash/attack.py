@@ -26,6 +26,7 @@ import torch
 from adversary.crash.batch import collate
 from adversary.crash.features import SceneTensors, _to_frame, scene_tensors
 from adversary.crash.generate import TIME_WEIGHTINGS, GenerationConfig, generate, logged_ego_future
+from adversary.crash.scenes import CONTROL_HZ
 from adversary.crash.selection import (
     SELECTORS,
     candidates,
@@ -36,14 +37,6 @@ from adversary.crash.selection import (
 from adversary.crash.traffic_model import states_of
 from rasterize.errors import InputError
 from riskmap.sim.rollout import check_replan_hz
-
-CONTROL_HZ = 10                         # every attack drive's control rate (the records' 10 Hz)
-
-
-def replan_hz_of(attack: dict) -> int:
-    """The replanning rate an attack record's drives used (records from before `replan_hz`
-    existed: 2 Hz), so that driving it again reproduces it."""
-    return int(attack.get("config", {}).get("replan_hz", AttackConfig.replan_hz))
 
 
 @dataclass(frozen=True)
@@ -76,6 +69,12 @@ class AttackConfig:
         return GenerationConfig(iterations=self.iterations_closed_loop if closed_loop else self.iterations_replay,
                                 lr=self.lr, replan_every=self.replan_every,
                                 stop_on_collision=self.stop_on_collision, time_weighting=self.time_weighting)
+
+
+def replan_hz_of(attack: dict) -> int:
+    """The replanning rate an attack record's drives used (records from before `replan_hz`
+    existed: 2 Hz), so that driving it again reproduces it."""
+    return int(attack.get("config", {}).get("replan_hz", AttackConfig.replan_hz))
 
 
 @dataclass(frozen=True)

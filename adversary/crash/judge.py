@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.interpolate import CubicHermiteSpline
 
-from adversary.crash.scenes import WINDOW_DT_S, SceneRecord
+from adversary.crash.scenes import CONTROL_HZ, WINDOW_DT_S, SceneRecord
 from adversary.crash.solution import ego_only_solution
 from rasterize.errors import InputError
 from rasterize.frames import box_corners
@@ -160,7 +160,7 @@ def with_ego_states(log: HumanLog, ego_states: np.ndarray) -> HumanLog:
 
 
 def rollout(record: SceneRecord, tracks: np.ndarray, rows, planner, planner_spec: str,
-            control_hz: int = 10, replan_hz: int = 2, keep_scene: bool = False,
+            control_hz: int = CONTROL_HZ, replan_hz: int = 2, keep_scene: bool = False,
             ego_states: np.ndarray | None = None, scene_steps: tuple[int, ...] = ()) -> Rollout:
     """Drive `planner` (made from `planner_spec`) against the log spliced with `tracks` at `rows`
     (module docstring). Empty `rows` (tracks [0, F, 6]) drives against the untouched record.

@@ -26,6 +26,7 @@ from riskmap.sim.log_replay import HumanLog
 from riskmap.sim.static_agents import MAX_STATIC_AGENTS, STATIC_FAMILIES
 
 WINDOW_DT_S = 0.5          # the traffic model's step (2 Hz)
+CONTROL_HZ = 10            # the recorded logs' rate, and every attack drive's control rate
 HISTORY_S = 2.0            # past the window shows (4 steps before the current one)
 RECORDED_ENV = "commonroad"  # env_id of a scene cut from a CommonRoad recording (adversary.crash.recorded)
 
@@ -126,7 +127,7 @@ def window_of(log: HumanLog, agent_ids: np.ndarray, step: int, future_steps: int
                  dt=WINDOW_DT_S, lanes=lanes, source=source, time_s=step * log.dt_s, route_xy=route_xy)
 
 
-def record_attack_scene(scene: AttackScene, control_hz: int = 10, radius_m: float = 60.0,
+def record_attack_scene(scene: AttackScene, control_hz: int = CONTROL_HZ, radius_m: float = 60.0,
                         max_agents: int = 12, env=None) -> SceneRecord:
     """Drive the human on `scene` for t0 + horizon and cut its window (module docstring).
 
