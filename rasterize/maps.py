@@ -53,27 +53,59 @@ def uncertainty_map(scene: Scene, grid: GridConfig, sigma_x: float = 0.5,
     origin, heading = ego_pose(scene)
     now = scene.current_index
     ados = [a for a in np.flatnonzero(scene.valid[:, now]) if a != scene.ego_index]
-    centres = cell_centres_ego(grid)
-    offsets = _subcell_offsets(grid)
-    density = np.zeros((grid.rows, grid.cols, offsets.shape[0]))
-    # Only cells within 4 sigma (plus a cell) of an agent can hold more than e^-8 of it.
+    centres = ego_from_world(scene.states[ados, now, :2], origin, heading).reshape(-1, 2)
+    headings = np.array([heading_angle(scene.states[a, now, 2:4]) - heading for a in ados])
+    return footprint_map(centres, headings, grid, sigma_x, sigma_y)
+
+
+def footprint_map(centres: np.ndarray, headings: np.ndarray, grid: GridConfig,
+                  sigma_x: float = 0.5, sigma_y: float = 1.5) -> np.ndarray:
+    """[rows, cols] in [0, 1]: agents at ego-frame `centres` [M, 2] heading `headings` [M] (rad,
+    ego frame), each an unnormalised Gaussian (peak 1) `sigma_y` m along its heading and
+    `sigma_x` across, combined by maximum, each cell the mean over its area (`uncertainty_map`'s
+    shape, wherever the agents are: now, predicted or recorded)."""
+    centres = np.asarray(centres, float).reshape(-1, 2)
+    return footprint_maps(centres, headings, np.zeros(len(centres), int), 1, grid, sigma_x,
+                          sigma_y)[0]
+
+
+def footprint_maps(centres: np.ndarray, headings: np.ndarray, layer: np.ndarray, layers: int,
+                   grid: GridConfig, sigma_x: float = 0.5, sigma_y: float = 1.5) -> np.ndarray:
+    """[layers, rows, cols]: `footprint_map` of the agents [M] of each layer (`layer` [M] in
+    0 … layers − 1, e.g. a time step), all drawn in one pass."""
+    centres = np.asarray(centres, float).reshape(-1, 2)
+    headings = np.asarray(headings, float).reshape(-1)
+    offsets = _subcell_offsets(grid)                                         # [S, 2]
+    density = np.zeros((layers, grid.rows, grid.cols, offsets.shape[0]))
+    if not len(centres):
+        return density.mean(axis=3).astype(np.float32)
+    # Only cells within 4 sigma (plus a cell) of an agent can hold more than e^-8 of it: each
+    # agent is drawn on its own window of the grid, those cells' rows and columns a rectangle.
     reach = 4.0 * max(sigma_x, sigma_y) + max(grid.row_m, grid.col_m)
-    for agent in ados:
-        centre = ego_from_world(scene.states[agent, now, :2], origin, heading)
-        (r0, c0), (r1, c1) = (grid_from_ego(centre + [reach, reach], grid),
-                              grid_from_ego(centre - [reach, reach], grid))
-        r0, c0 = max(r0, 0), max(c0, 0)
-        r1, c1 = min(r1, grid.rows - 1), min(c1, grid.cols - 1)
+    first = grid_from_ego(centres + [reach, reach], grid)                    # [M, 2] top-left
+    last = grid_from_ego(centres - [reach, reach], grid)                     # bottom-right
+    # Every agent's Gaussian on a patch of one size (the largest window) at once, so that the
+    # exponentials are one array operation; cells outside an agent's own window are left out.
+    size = (last - first).max(axis=0) + 1                                    # [2] rows, cols
+    rows = first[:, 0, None] + np.arange(size[0])                            # [M, P]
+    cols = first[:, 1, None] + np.arange(size[1])                            # [M, Q]
+    cell_x = ego_from_grid(np.stack([rows, np.zeros_like(rows)], -1), grid)[..., 0]   # [M, P]
+    cell_y = ego_from_grid(np.stack([np.zeros_like(cols), cols], -1), grid)[..., 1]   # [M, Q]
+    dx = cell_x[:, :, None, None] + offsets[:, 0] - centres[:, 0, None, None, None]   # [M, P, 1, S]
+    dy = cell_y[:, None, :, None] + offsets[:, 1] - centres[:, 1, None, None, None]   # [M, 1, Q, S]
+    cos, sin = np.cos(headings)[:, None, None, None], np.sin(headings)[:, None, None, None]
+    along = dx * cos + dy * sin
+    across = -dx * sin + dy * cos
+    patches = np.exp(-0.5 * ((along / sigma_y) ** 2 + (across / sigma_x) ** 2))   # [M, P, Q, S]
+    for m in range(len(centres)):
+        r0, c0 = max(first[m, 0], 0), max(first[m, 1], 0)
+        r1, c1 = min(last[m, 0], grid.rows - 1), min(last[m, 1], grid.cols - 1)
         if r0 > r1 or c0 > c1:
             continue
-        rel_heading = heading_angle(scene.states[agent, now, 2:4]) - heading
-        d = centres[r0:r1 + 1, c0:c1 + 1, None, :] + offsets - centre
-        along = d[..., 0] * np.cos(rel_heading) + d[..., 1] * np.sin(rel_heading)
-        across = -d[..., 0] * np.sin(rel_heading) + d[..., 1] * np.cos(rel_heading)
-        g = np.exp(-0.5 * ((along / sigma_y) ** 2 + (across / sigma_x) ** 2))
-        window = density[r0:r1 + 1, c0:c1 + 1]
-        np.maximum(window, g, out=window)
-    return density.mean(axis=2).astype(np.float32)
+        window = density[layer[m], r0:r1 + 1, c0:c1 + 1]
+        pr, pc = r0 - first[m, 0], c0 - first[m, 1]
+        np.maximum(window, patches[m, pr:pr + r1 - r0 + 1, pc:pc + c1 - c0 + 1], out=window)
+    return density.mean(axis=3).astype(np.float32)
 
 
 def goal_map(goal_cell: tuple[int, int], grid: GridConfig, variance: float = 5.0) -> np.ndarray:
