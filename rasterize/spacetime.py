@@ -31,6 +31,12 @@ EVIDENCE_CHANNELS = ("predicted", "red")
 _STOP_LINE_SAMPLES_PER_CELL = 4
 
 
+def quantised(maps: np.ndarray) -> np.ndarray:
+    """`maps` in [0, 1] as uint8 (255 = 1): how samples store per-step maps (a twelfth of the
+    space) and so how the planner must see them too, to the same 1/255."""
+    return np.round(np.clip(maps, 0.0, 1.0) * 255.0).astype(np.uint8)
+
+
 def step_times(steps: int, step_s: float) -> np.ndarray:
     """Seconds ahead of each step [T]: step_s, 2 step_s, …, steps · step_s."""
     if steps < 1 or not step_s > 0:

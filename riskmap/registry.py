@@ -54,9 +54,9 @@ def make_planner(spec: str, seed: int = 0, goal_variance: float | None = None):
 
         return ConstantVelocityPlanner()
     if kind == "riskmap" and arg:
-        from riskmap.planner.riskmap_planner import RiskMapPlanner
+        from riskmap.planner.riskmap_planner import load_planner
 
-        return RiskMapPlanner.load(arg, seed=seed, goal_variance=goal_variance)
+        return load_planner(arg, seed=seed, goal_variance=goal_variance)
     if kind == "replay" and not arg:
         from riskmap.sim.log_replay import ReplayPlanner
 

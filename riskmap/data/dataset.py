@@ -15,6 +15,12 @@ A sample (grid G = resolution, C = raster channels):
     route_cells  int64   [256, 2]       cells of the route every metre from the ego, padded with -1
                                         (the risk-limited goal: `riskmap.planner.risk_goal`)
     future       float32 [F, 2]         the ego's future waypoints, ego frame, metres
+With a space-time planner's settings (`spacetime`, T = its steps; DESIGN §3b) also:
+    st_evidence    uint8→float32 [T, E, G, G]  per-step evidence the model sees, present only
+                                               (`rasterize.spacetime.step_evidence`)
+    st_uncertainty uint8→float32 [T, G, G]     N_t: the others' footprints at their recorded
+                                               positions at step t (training signal only)
+    st_demo        int64 [T, 2]                the human's cell at step t, −1 off the grid
 """
 
 from __future__ import annotations
@@ -87,7 +93,7 @@ class DemoDataset(_TorchDataset):
 
     def __init__(self, root: str | Path, resolution: int = 50, raster: RasterConfig | None = None,
                  sigma_x: float = 0.5, sigma_y: float = 1.5, goal_variance: float = 5.0,
-                 goal: str = "route"):
+                 goal: str = "route", spacetime=None):
         if goal not in ("route", "demo"):
             raise InputError(f"goal must be 'route' or 'demo', got {goal!r}")
         self.goal_source = goal
@@ -106,6 +112,8 @@ class DemoDataset(_TorchDataset):
         self.raster_config = collected if raster is None else raster
         self.grid = collected.grid(resolution)
         self.sigma_x, self.sigma_y, self.goal_variance = sigma_x, sigma_y, goal_variance
+        # riskmap.planner.st_model.SpaceTimeConfig, or None: the spatial planner's samples
+        self.spacetime = spacetime
         self.source = self.manifest["config"]["env_id"]
         try:
             index = json.loads((self.root / INDEX).read_text())
@@ -201,6 +209,8 @@ class DemoDataset(_TorchDataset):
             "route_cells": route_cells(scene, self.grid),
             "future": ego_from_world(scene.ego_future_xy(), origin, heading).astype(np.float32),
         }
+        if self.spacetime is not None:
+            sample |= spacetime_arrays(scene, self.grid, self.spacetime, self.sigma_x, self.sigma_y)
         return sample
 
 
@@ -245,12 +255,29 @@ class PerturbedEgo(_TorchDataset):
         return self.base.sample(self.base.scene(index).with_ego_perturbed(*draw))
 
 
+# Sample arrays stored as uint8 (255 = 1.0) to keep the sample cache small; `as_tensors` scales them.
+UINT8_ARRAYS = ("raster", "st_evidence", "st_uncertainty")
+
+
+def spacetime_arrays(scene: Scene, grid, spacetime, sigma_x: float, sigma_y: float
+                     ) -> dict[str, np.ndarray]:
+    """The space-time keys of a sample (module docstring) for settings `spacetime`."""
+    from rasterize.spacetime import demo_cells_per_step, future_footprints, quantised, step_evidence
+
+    steps, step_s = spacetime.steps, spacetime.step_s
+    return {
+        "st_evidence": quantised(step_evidence(scene, grid, steps, step_s, sigma_x, sigma_y)),
+        "st_uncertainty": quantised(future_footprints(scene, grid, steps, step_s, sigma_x, sigma_y)),
+        "st_demo": demo_cells_per_step(scene, grid, steps, step_s),
+    }
+
+
 def as_tensors(arrays: dict[str, np.ndarray]) -> dict:
-    """A sample's tensors (the module docstring) from `DemoDataset.sample_arrays`: the raster
-    scaled from uint8 to float32 [0, 1], every other array as it is."""
+    """A sample's tensors (the module docstring) from `DemoDataset.sample_arrays`: the uint8
+    arrays (`UINT8_ARRAYS`) scaled to float32 [0, 1], every other array as it is."""
     import torch
 
-    return {k: torch.from_numpy(v.astype(np.float32) / 255.0 if k == "raster" else np.ascontiguousarray(v))
+    return {k: torch.from_numpy(v.astype(np.float32) / 255.0 if k in UINT8_ARRAYS else np.ascontiguousarray(v))
             for k, v in arrays.items()}
 
 

@@ -88,6 +88,8 @@ def cache_keys(dataset) -> dict[str, dict]:
         "sigma_y": float(dataset.sigma_y),
         "goal_variance": float(dataset.goal_variance),
         "goal": dataset.goal_source,
+        # the space-time planner's per-step maps (absent from spatial samples' keys, as before)
+        **({"spacetime": dataset.spacetime.to_dict()} if getattr(dataset, "spacetime", None) else {}),
     }
     return {RASTER: drawn, "maps": maps}
 

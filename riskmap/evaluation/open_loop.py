@@ -27,7 +27,7 @@ from riskmap.data.dataset import DemoDataset, with_human_goal
 from riskmap.data.groups import windows_of_groups
 from riskmap.infra.atomic import write_json
 from riskmap.infra.checkpoint import read_sidecar
-from riskmap.planner.riskmap_planner import RiskMapPlanner
+from riskmap.planner.riskmap_planner import RiskMapPlanner, load_planner
 
 
 def window_errors(planner: RiskMapPlanner, dataset: DemoDataset, indices, sigma_x: float,
@@ -66,7 +66,7 @@ def evaluate(checkpoint: Path, data: Path, limit: int | None = None, seed: int =
     the checkpoint's)."""
     import dataclasses
 
-    planner = RiskMapPlanner.load(checkpoint, seed=seed, goal_variance=goal_variance)
+    planner = load_planner(checkpoint, seed=seed, goal_variance=goal_variance)
     changes = {k: v for k, v in (("timing", timing), ("keep_gap", keep_gap)) if v is not None}
     planner.sampler = dataclasses.replace(planner.sampler, **changes)
     side = read_sidecar(checkpoint)

@@ -171,9 +171,9 @@ def plan_figures(checkpoint: Path, data: Path, out: Path, count: int, seed: int 
     `groups`), planned by a checkpoint towards the route rule's goal or the human's end."""
     from riskmap.data.dataset import DemoDataset, with_human_goal
     from riskmap.data.groups import windows_of_groups
-    from riskmap.planner.riskmap_planner import RiskMapPlanner
+    from riskmap.planner.riskmap_planner import load_planner
 
-    planner = RiskMapPlanner.load(checkpoint, seed=seed, goal_variance=goal_variance)
+    planner = load_planner(checkpoint, seed=seed, goal_variance=goal_variance)
     dataset = DemoDataset(data, planner.grid.rows, raster=planner.raster)
     pool = windows_of_groups(dataset, groups) if groups else list(range(len(dataset)))
     picks = [pool[k] for k in np.unique(np.linspace(0, len(pool) - 1, min(count, len(pool))).astype(int))]

@@ -154,6 +154,16 @@ def for_inference(model: RiskMapGenerator) -> RiskMapGenerator:
     return fused.to(memory_format=torch.channels_last)
 
 
+def with_raster_channels(state: dict, in_channels: int) -> dict:
+    """A risk-map state dict whose first convolution takes `in_channels` raster channels: the
+    trained kernels on the first channels, zeros on the added ones, so that the network computes
+    exactly what it did while the added channels learn from zero."""
+    weight = state["backbone.0.weight"]                         # [64, C, 7, 7]
+    grown = weight.new_zeros((weight.shape[0], in_channels, *weight.shape[2:]))
+    grown[:, : weight.shape[1]] = weight
+    return {**state, "backbone.0.weight": grown}
+
+
 def load_backbone_weights(model: RiskMapGenerator, path: str | Path) -> None:
     """Initialise the stem and layer1 from a local torchvision ResNet-34 state dict file.
 
@@ -195,8 +205,12 @@ def load_backbone_weights(model: RiskMapGenerator, path: str | Path) -> None:
 
 
 def load_model(path: Path, device: str = "cpu") -> tuple[RiskMapGenerator, dict]:
-    """The trained generator (eval mode) and its sidecar."""
+    """The trained generator (eval mode) and its sidecar; a space-time checkpoint is an
+    InputError naming it (`riskmap.planner.st_model.load_spacetime_model` loads those)."""
     data = read_sidecar(path)
+    if data.get("planner") == "spacetime":
+        raise InputError(f"checkpoint {path} is a space-time planner; this needs a spatial risk-map "
+                         "checkpoint (`riskmap train` without --planner spacetime)")
     model = load_weights(RiskMapGenerator(ModelConfig(**data["model"])), path,
                          "it was made by an incompatible version")
     model.to(device)

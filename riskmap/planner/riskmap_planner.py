@@ -55,6 +55,19 @@ def risk_goal_of(side: dict) -> RiskGoalConfig | None:
     return RiskGoalConfig(**settings)
 
 
+def load_planner(checkpoint: str | Path, seed: int = 0, goal_variance: float | None = None):
+    """The planner of a risk-map checkpoint, whichever kind its sidecar names: the spatial
+    `RiskMapPlanner` (the paper's), or the space-time `SpaceTimePlanner` (`planner: spacetime`)."""
+    from riskmap.infra.checkpoint import read_sidecar
+    from riskmap.planner.st_model import is_spacetime
+
+    if is_spacetime(read_sidecar(Path(checkpoint))):
+        from riskmap.planner.st_planner import SpaceTimePlanner
+
+        return SpaceTimePlanner.load(checkpoint, seed=seed, goal_variance=goal_variance)
+    return RiskMapPlanner.load(checkpoint, seed=seed, goal_variance=goal_variance)
+
+
 class RiskMapPlanner:
     """BEV raster → risk map → soft value iteration → SVF → sampled 12-waypoint trajectory.
 

@@ -27,10 +27,13 @@ class Plan:
 
     The intermediate products are there for figures; planners without them leave them None.
     risk_map, goal_map, svf [G, G]; policy [5, G, G]; timings_s: seconds per stage.
+    A space-time planner (DESIGN §3b) also gives risk_steps [T, G, G] (r_t; risk_map is r_1,
+    the map in force now) and svf_steps [T, G, G] (D_t; svf is their sum).
 
-    `svf` may be given as a function of no arguments: it is then computed when first read, its
-    seconds added to timings_s["svf"] (not to "total", the time to the waypoints). Only figures
-    and open-loop metrics read it, so a closed-loop replan does not pay for it.
+    `svf` (and `svf_steps`) may be given as a function of no arguments: it is then computed
+    when first read, its seconds added to timings_s["svf"] (not to "total", the time to the
+    waypoints). Only figures and open-loop metrics read it, so a closed-loop replan does not pay
+    for it.
     """
 
     waypoints: np.ndarray
@@ -40,26 +43,34 @@ class Plan:
     svf: np.ndarray | Callable[[], np.ndarray] | None = None
     goal_cell: tuple[int, int] | None = None
     timings_s: dict = field(default_factory=dict)
+    risk_steps: np.ndarray | None = None
+    svf_steps: np.ndarray | Callable[[], np.ndarray] | None = None
 
     def __getstate__(self) -> dict:
-        """A pickled plan (sent to another process) carries its computed SVF, not a function."""
-        return {**self.__dict__, "_svf": self.svf}
+        """A pickled plan (sent to another process) carries its computed SVFs, not functions."""
+        return {**self.__dict__, "_svf": self.svf, "_svf_steps": self.svf_steps}
 
 
-def _read_svf(plan: Plan) -> np.ndarray | None:
-    value = plan.__dict__.get("_svf")
-    if callable(value):
-        start = time.perf_counter()
-        value = plan.__dict__["_svf"] = value()
-        plan.timings_s["svf"] = time.perf_counter() - start
-    return value
+def _lazy(name: str, doc: str) -> property:
+    """A Plan attribute that may be set to a function of no arguments, called when first read."""
+    slot = "_" + name
+
+    def read(plan: Plan):
+        value = plan.__dict__.get(slot)
+        if callable(value):
+            start = time.perf_counter()
+            value = plan.__dict__[slot] = value()
+            plan.timings_s["svf"] = plan.timings_s.get("svf", 0.0) + time.perf_counter() - start
+        return value
+
+    def write(plan: Plan, value) -> None:
+        plan.__dict__[slot] = value
+
+    return property(read, write, doc=doc)
 
 
-def _write_svf(plan: Plan, value) -> None:
-    plan.__dict__["_svf"] = value
-
-
-Plan.svf = property(_read_svf, _write_svf, doc="expected visits [G, G] (computed when first read)")
+Plan.svf = _lazy("svf", "expected visits [G, G] (computed when first read)")
+Plan.svf_steps = _lazy("svf_steps", "visitation per step [T, G, G], space-time planners only")
 
 
 @runtime_checkable

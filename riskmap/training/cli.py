@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from riskmap.infra.cli import add_config_options, config_from_args, positive_int
-from riskmap.training.config import BaselineTrainConfig, TrainConfig
+from riskmap.training.config import PLANNERS, BaselineTrainConfig, TrainConfig
 
 
 def _cmd_train(args: argparse.Namespace) -> int:
@@ -29,7 +29,7 @@ def _cmd_train_baseline(args: argparse.Namespace) -> int:
 
 
 POSITIVE = {name: positive_int for name in ("resolution", "epochs", "batch_size", "horizon",
-                                             "max_windows", "history_frames")}
+                                             "max_windows", "history_frames", "steps")}
 HELP = {
     "data": "dataset directory (from riskmap collect)",
     "out": "run directory",
@@ -57,6 +57,13 @@ HELP = {
     "timing_head": "also learn the demonstrations' timing: a head predicting how far along its path "
                    "the ego is at each waypoint time, by which the planner then times its plan",
     "freeze_risk": "train only the timing head; the risk map stays --init-checkpoint's",
+    "planner": "spatial: the paper's planner (one risk map); spacetime: a reward map per future "
+               "step and value iteration over (step, cell), so it can wait and yield (DESIGN 3b)",
+    "steps": "spacetime: reward maps over the 6 s plan (12: one per 0.5 s; 6, 4 or 3: coarser)",
+    "max_forward": "spacetime: cells the ego may move forward per step (K); default: from the "
+                   "demonstrations' fastest steps",
+    "max_across": "spacetime: cells the ego may move sideways per step (L); default: from the "
+                  "demonstrations",
     "predict_s": "draw the other agents' predicted future (constant speed along their lanes) and "
                  "the traffic lights' red over this many seconds as 2 extra raster channels "
                  "(0: none; default: as the dataset was collected, normally none)",
@@ -69,8 +76,8 @@ def add_parsers(sub) -> None:
                        "sigma_y", "goal_variance", "goal", "epochs", "batch_size", "lr", "horizon",
                        "val_groups", "device", "seed", "backbone_weights", "init_checkpoint",
                        "max_windows", "predict_s", "risk_goal_threshold", "timing_head", "freeze_risk",
-                       "workers", "cache", help=HELP,
-                       option_types=POSITIVE)
+                       "planner", "steps", "max_forward", "max_across", "workers", "cache", help=HELP,
+                       option_types=POSITIVE, choices={"planner": PLANNERS})
     p.add_argument("--resume", action="store_true", help="continue an interrupted run exactly")
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=_cmd_train)

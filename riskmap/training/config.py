@@ -28,6 +28,9 @@ def _normalise_kind(kind: str) -> str:
     return normalise_kind(kind)
 
 
+PLANNERS = ("spatial", "spacetime")
+
+
 @dataclass(frozen=True)
 class TrainConfig:
     """Training run settings. Distances in metres, sigmas in metres, goal variance in cells²."""
@@ -72,6 +75,14 @@ class TrainConfig:
     # timing head alone, the risk map kept exactly as --init-checkpoint's.
     timing_head: bool = False
     freeze_risk: bool = False
+    # Which planner to train: `spatial`, the paper's (one risk map, DESIGN §3), or `spacetime`
+    # (a reward map per future step and value iteration over (step, cell), DESIGN §3b): T steps
+    # over the plan's 6 s, at most K cells forward and L across per step (None: from the data,
+    # `riskmap.training.spacetime.reach_from_data`).
+    planner: str = "spatial"
+    steps: int = 12
+    max_forward: int | None = None
+    max_across: int | None = None
     # How samples are made; neither changes what is computed (a resume may change them):
     workers: int | None = None          # sample processes; None: 0 on the CPU, else up to 4
     cache: str = "auto"                 # sample cache folder; auto: DATA/cache, else OUT/cache; off
@@ -99,6 +110,20 @@ class TrainConfig:
         if not math.isfinite(self.uncertainty_weight) or self.uncertainty_weight < 0:
             raise InputError(f"--uncertainty-weight must be a finite number >= 0, got "
                              f"{self.uncertainty_weight}")
+        if self.planner not in PLANNERS:
+            raise InputError(f"--planner {self.planner!r} is unknown; use {' or '.join(PLANNERS)}")
+        if self.planner == "spacetime":
+            clash = [name for name, on in (("--timing-head", self.timing_head),
+                                           ("--freeze-risk", self.freeze_risk),
+                                           ("--risk-goal-threshold", self.risk_goal_threshold is not None),
+                                           ("--goal demo", self.goal != "route")) if on]
+            if clash:
+                raise InputError(f"--planner spacetime times its plan itself and takes the route "
+                                 f"rule's goal; drop {', '.join(clash)}")
+            from riskmap.planner.st_model import SpaceTimeConfig
+
+            SpaceTimeConfig(self.steps, 1 if self.max_forward is None else self.max_forward,
+                            0 if self.max_across is None else self.max_across)   # validates
         check_device(self.device)
         for name in ("epochs", "batch_size", "resolution"):
             if getattr(self, name) < 1:

@@ -42,6 +42,7 @@ from riskmap.planner.model import (
     demo_arc_lengths,
     load_backbone_weights,
     timing_loss,
+    with_raster_channels,
 )
 from riskmap.planner.sampler import SamplerConfig, sample_trajectory
 from riskmap.training.config import TrainConfig
@@ -251,16 +252,6 @@ def raster_for(data: str, predict_s: float | None) -> RasterConfig | None:
     return replace(collected_raster_config(data), predict_s=predict_s)
 
 
-def with_raster_channels(state: dict, in_channels: int) -> dict:
-    """A risk-map state dict whose first convolution takes `in_channels` raster channels: the
-    trained kernels on the first channels, zeros on the added ones, so that the network computes
-    exactly what it did while the added channels learn from zero."""
-    weight = state["backbone.0.weight"]                         # [64, C, 7, 7]
-    grown = weight.new_zeros((weight.shape[0], in_channels, *weight.shape[2:]))
-    grown[:, : weight.shape[1]] = weight
-    return {**state, "backbone.0.weight": grown}
-
-
 # Settings a resume may change: how long to train, and how samples are made (not what they are).
 RESUMABLE_CHANGES = ("epochs", "workers", "cache")
 
@@ -331,10 +322,22 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True, on_e
                              config.augment_heading_deg, config.augment_lateral_m)
     model_config = ModelConfig(in_channels=len(channels(dataset.raster_config)),
                                resolution=config.resolution, timing_head=config.timing_head)
-    model = RiskMapGenerator(model_config)
+    spacetime = config.planner == "spacetime"
+    if spacetime:
+        from riskmap.training import spacetime as st_train
+
+        st, reach = st_train.spacetime_config(config, dataset, train_idx)
+        dataset.spacetime = st
+        irl = st_train.irl_config(config, st, dataset.goal_variance)
+        model = st_train.build_model(model_config, st, config.init_checkpoint)
+        if progress:
+            print(f"space-time planner: T={st.steps} steps of {st.step_s:g} s, K={st.max_forward} "
+                  f"cells forward, L={st.max_across} across per step", file=sys.stderr)
+    else:
+        model = RiskMapGenerator(model_config)
     if config.backbone_weights:
         load_backbone_weights(model, config.backbone_weights)
-    if config.init_checkpoint:
+    if config.init_checkpoint and not spacetime:
         _init_from(model, model_config, Path(config.init_checkpoint))
     model.to(device)
     if channels_last is None:
@@ -367,6 +370,8 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True, on_e
         write_log(out / "log.csv", fields, rows)
         metrics = {k: v for k, v in rows[-1].items() if k != "epoch"}
         sidecar = _sidecar(config, model_config, dataset, irl, data, metrics, epoch) | {"best": best}
+        if spacetime:
+            sidecar |= st_train.sidecar_extra(st, reach)
         if best.get("epoch") == epoch:
             save_checkpoint(out / "best", model, sidecar)
         save_checkpoint(out / "last", model, sidecar)
@@ -395,6 +400,16 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True, on_e
             if batch is None:
                 break
             batch = _to(batch, device, channels_last)
+            if spacetime:
+                loss, nll = st_train.train_step(model, batch, irl)
+                optimizer.zero_grad()
+                loss.backward()
+                torch.nn.utils.clip_grad_norm_(model.parameters(), config.grad_clip)
+                optimizer.step()
+                losses.append(loss.item())
+                nlls.append(nll)
+                bar.set_postfix(nll=f"{np.mean(nlls):.2f}")
+                continue
             risk, arcs = _forward(model, batch, config.timing_head)
             step = irl_step(risk, batch, irl)
             loss = step.loss
@@ -412,7 +427,9 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True, on_e
         trained = time.perf_counter()
         metrics = {"train_loss": float(np.mean(losses)), "train_nll": float(np.mean(nlls)),
                    **({"train_timing": float(np.mean(timings))} if timings else {}),
-                   **_evaluate(model, val_loader, config, irl, dataset.grid, device, channels_last)}
+                   **(st_train.evaluate(model, val_loader, config, irl, dataset.grid, device,
+                                        lambda b: _to(b, device, channels_last)) if spacetime else
+                      _evaluate(model, val_loader, config, irl, dataset.grid, device, channels_last))}
         if on_epoch is not None:
             on_epoch(epoch, {"losses": losses, "nlls": nlls, "train_windows": len(train_idx),
                              "val_windows": len(val_idx), "train_s": trained - started,

@@ -1,0 +1,141 @@
+"""The space-time risk-map generator: one reward map per future step (DESIGN §3b).
+
+    raster [B, C, 200, 200] ─ ResNet-34 stem + layer1 + conv ─► features [B, 64, G, G]
+    features ⊕ motion [B, 3, G, G] ─ 1×1 conv ─────────────────► base [B, h, G, G]     (once)
+    evidence_t [B, E, G, G] ⊕ t/T ─ 3×3 conv ──────────────────► step_t [B, h, G, G]   (per step)
+    ReLU(base + step_t) ─ 1×1 convs h→h→1 ─ LogSigmoid ────────► r_t [B, G, G] ≤ 0,  t = 1 … T
+
+The encoder and the layers of the head are the spatial generator's (`RiskMapGenerator`, the
+paper's): its first 1×1 convolution splits into the part that reads the features and motion
+(computed once per plan, not T times) and the part that reads each step's evidence (the other
+agents' predicted footprints and the red stop lines at step t, `rasterize.spacetime`) and the
+time t/T. The 3×3 kernel lets a cell see an agent predicted in the cell next to it. Initialised
+from a spatial checkpoint with the step part at zero, it computes that checkpoint's risk map at
+every step, and training adds when.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+from rasterize.errors import InputError
+from rasterize.spacetime import EVIDENCE_CHANNELS
+from riskmap.planner.model import ModelConfig, RiskMapGenerator
+from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS
+
+PLANNER_KIND = "spacetime"            # a checkpoint sidecar's `planner` (absent: the spatial one)
+MAX_FORWARD_CELLS = 16                # K beyond this is no longer a step of one vehicle
+MAX_ACROSS_CELLS = 8
+
+
+@dataclass(frozen=True)
+class SpaceTimeConfig:
+    """T steps of `step_s` seconds covering the plan's 6 s; per step the ego moves 0 … K =
+    `max_forward` rows forward and −L … +L = `max_across` columns across (cells)."""
+
+    steps: int = PLAN_STEPS
+    max_forward: int = 4
+    max_across: int = 1
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.steps, int) or self.steps < 1 or PLAN_STEPS % self.steps:
+            raise InputError(f"space-time steps T={self.steps!r}: must divide the plan's "
+                             f"{PLAN_STEPS} waypoints (1, 2, 3, 4, 6 or 12)")
+        if not isinstance(self.max_forward, int) or not 1 <= self.max_forward <= MAX_FORWARD_CELLS:
+            raise InputError(f"--max-forward K={self.max_forward!r}: must be 1 … {MAX_FORWARD_CELLS} "
+                             "cells per step")
+        if not isinstance(self.max_across, int) or not 0 <= self.max_across <= MAX_ACROSS_CELLS:
+            raise InputError(f"--max-across L={self.max_across!r}: must be 0 … {MAX_ACROSS_CELLS} "
+                             "cells per step")
+
+    @property
+    def step_s(self) -> float:
+        """Seconds per step: the plan's 6 s over T."""
+        return PLAN_STEPS * PLAN_DT_S / self.steps
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+class SpaceTimeRiskMapGenerator(RiskMapGenerator):
+    """(raster [B, C, H, W], motion [B, 3, G, G], evidence [B, T, E, G, G]) → rewards [B, T, G, G]."""
+
+    def __init__(self, config: ModelConfig, spacetime: SpaceTimeConfig):
+        if config.timing_head:
+            raise InputError("the space-time planner times its plan itself; drop --timing-head")
+        super().__init__(config)
+        self.spacetime = spacetime
+        h = config.head_channels
+        self.head = nn.ModuleDict({
+            "base": nn.Conv2d(config.encoder_channels + 3, h, 1),
+            "step": nn.Conv2d(len(EVIDENCE_CHANNELS) + 1, h, 3, padding=1, bias=False),
+            "rest": nn.Sequential(nn.ReLU(inplace=True), nn.Conv2d(h, h, 1), nn.ReLU(inplace=True),
+                                  nn.Conv2d(h, 1, 1)),
+        })
+
+    def forward(self, raster: torch.Tensor, motion: torch.Tensor, evidence: torch.Tensor
+                ) -> torch.Tensor:
+        g, steps = self.config.resolution, self.spacetime.steps
+        b = raster.shape[0]
+        if evidence.shape[1:] != (steps, len(EVIDENCE_CHANNELS), g, g):
+            raise InputError(f"evidence must be [B, {steps}, {len(EVIDENCE_CHANNELS)}, {g}, {g}], "
+                             f"got {tuple(evidence.shape)}")
+        features = self.encoder_conv(self.backbone(raster))
+        if features.shape[-2:] != (g, g):
+            mode = "area" if features.shape[-1] > g else "bilinear"
+            features = F.interpolate(features, size=(g, g), mode=mode,
+                                     **({} if mode == "area" else {"align_corners": False}))
+        base = self.head["base"](torch.cat([features, motion], dim=1))          # [B, h, G, G]
+        time = torch.arange(1, steps + 1, dtype=evidence.dtype, device=evidence.device) / steps
+        time = time.view(1, steps, 1, 1, 1).expand(b, steps, 1, g, g)
+        step_in = torch.cat([evidence, time], dim=2).flatten(0, 1)             # [B T, E + 1, G, G]
+        step_in = step_in.contiguous(memory_format=torch.channels_last) \
+            if base.is_contiguous(memory_format=torch.channels_last) else step_in
+        hidden = self.head["step"](step_in).unflatten(0, (b, steps)) + base[:, None]
+        logits = self.head["rest"](hidden.flatten(0, 1)).view(b, steps, g, g)
+        return F.logsigmoid(logits)
+
+
+def state_from_spatial(model: SpaceTimeRiskMapGenerator, spatial_state: dict) -> dict:
+    """`model`'s state dict started from a spatial checkpoint's: the encoder as trained, the
+    head's layers as the spatial head's, the per-step part at zero (so the network computes the
+    spatial risk map at every step until training teaches it otherwise)."""
+    state = model.state_dict()
+    for key, value in spatial_state.items():
+        if key.startswith(("backbone.", "encoder_conv.")):
+            state[key] = value
+    mapping = {"head.0.": "head.base.", "head.2.": "head.rest.1.", "head.4.": "head.rest.3."}
+    for key, value in spatial_state.items():
+        for old, new in mapping.items():
+            if key.startswith(old):
+                state[new + key[len(old):]] = value
+    state["head.step.weight"] = torch.zeros_like(state["head.step.weight"])
+    return state
+
+
+def is_spacetime(sidecar: dict) -> bool:
+    """Whether a risk-map checkpoint's sidecar is the space-time planner's."""
+    return sidecar.get("planner") == PLANNER_KIND
+
+
+def load_spacetime_model(path: Path, device: str = "cpu"
+                         ) -> tuple[SpaceTimeRiskMapGenerator, dict]:
+    """The trained space-time generator (eval mode) and its sidecar; a spatial checkpoint is an
+    InputError naming it."""
+    from rasterize.config import RasterConfig
+    from riskmap.infra.checkpoint import load_weights, read_sidecar
+
+    side = read_sidecar(Path(path))
+    if not is_spacetime(side):
+        raise InputError(f"checkpoint {path} is a spatial risk-map planner; this needs a "
+                         "space-time one (`riskmap train --planner spacetime`)")
+    model = SpaceTimeRiskMapGenerator(ModelConfig(**side["model"]),
+                                      SpaceTimeConfig(**side["spacetime"]))
+    model = load_weights(model, Path(path), "it was made by an incompatible version")
+    RasterConfig.from_dict(side["raster"])
+    return model.to(device).eval(), side

@@ -1,0 +1,119 @@
+"""The space-time planner: BEV raster and per-step evidence → reward maps r_1 … r_T → value
+iteration in space-time → time-indexed policy → sampled positions at each step (DESIGN §3b).
+
+It decides where *and when*: standing still and slowing are actions, and a cell another agent
+is predicted to take at step t can be cheap before and after t and costly at t. The goal map is
+the route rule's, as the spatial planner's (`RiskMapPlanner`).
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from rasterize.config import GridConfig, RasterConfig
+from rasterize.errors import InputError
+from rasterize.maps import goal_map, motion_features, route_goal_cell, start_cell
+from rasterize.raster import rasterize_scene
+from rasterize.scene import Scene
+from rasterize.spacetime import quantised, step_evidence
+from riskmap.infra.checkpoint import route_settings_of
+from riskmap.planner.irl import goal_log_map
+from riskmap.planner.st_model import SpaceTimeConfig, load_spacetime_model
+from riskmap.planner.st_sampler import SpaceTimeSamplerConfig, spacetime_plan
+from riskmap.planner.st_vi import spacetime_value_iteration, spacetime_visitation
+from riskmap.sim.plan import Plan
+
+
+class SpaceTimePlanner:
+    """`reset(scene)`, `plan(scene) -> Plan`; the plan's `risk_map` is r_1 (the map in force
+    now), `risk_steps` all T maps, `svf_steps` the visitation per step (computed when read)."""
+
+    def __init__(self, model: torch.nn.Module, raster: RasterConfig, grid: GridConfig,
+                 spacetime: SpaceTimeConfig, goal_variance: float, sigma_x: float = 0.5,
+                 sigma_y: float = 1.5, sampler: SpaceTimeSamplerConfig = SpaceTimeSamplerConfig(),
+                 seed: int = 0):
+        from riskmap.planner.model import for_inference
+
+        self.model, self.raster, self.grid = for_inference(model), raster, grid
+        self.spacetime, self.goal_variance = spacetime, goal_variance
+        self.sigma_x, self.sigma_y = sigma_x, sigma_y
+        self.sampler, self.seed = sampler, seed
+        self.route_settings: dict | None = None   # route rule of recorded training data, if any
+        self._calls = 0
+
+    @classmethod
+    def load(cls, checkpoint: str | Path, seed: int = 0,
+             goal_variance: float | None = None) -> SpaceTimePlanner:
+        """Goal variance (cells²): `goal_variance`, else the sidecar's `planning.goal_variance`,
+        else the training value."""
+        model, side = load_spacetime_model(Path(checkpoint))
+        variance = goal_variance
+        if variance is None:
+            variance = side.get("planning", {}).get("goal_variance", side["irl"]["goal_variance"])
+        if not variance > 0:
+            raise InputError(f"goal variance must be > 0 cells², got {variance}")
+        planner = cls(model, RasterConfig.from_dict(side["raster"]), GridConfig.from_dict(side["grid"]),
+                      SpaceTimeConfig(**side["spacetime"]), variance, side["maps"]["sigma_x"],
+                      side["maps"]["sigma_y"], SpaceTimeSamplerConfig(**side.get("sampler", {})),
+                      seed)
+        planner.route_settings = route_settings_of(side)
+        return planner
+
+    def reset(self, scene: Scene) -> None:
+        self._calls = 0
+
+    def rewards(self, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
+        """(r [T, G, G], evidence [T, E, G, G]) of a scene, from its present only."""
+        scene = scene.past()
+        st = self.spacetime
+        evidence = quantised(step_evidence(scene, self.grid, st.steps, st.step_s, self.sigma_x,
+                                           self.sigma_y)).astype(np.float32) / 255.0
+        with torch.inference_mode():
+            image = torch.from_numpy(rasterize_scene(scene, self.raster)).float().div_(255.0)[None]
+            image = image.contiguous(memory_format=torch.channels_last)
+            reward = self.model(image, torch.from_numpy(motion_features(scene, self.grid))[None],
+                                torch.from_numpy(evidence)[None])
+        return reward[0].numpy(), evidence
+
+    def plan(self, scene: Scene) -> Plan:
+        scene = scene.past()
+        st, t = self.spacetime, {}
+        t0 = time.perf_counter()
+        raster = rasterize_scene(scene, self.raster)
+        motion = motion_features(scene, self.grid)
+        evidence = quantised(step_evidence(scene, self.grid, st.steps, st.step_s, self.sigma_x,
+                                           self.sigma_y)).astype(np.float32) / 255.0
+        goal_cell, start = route_goal_cell(scene, self.grid), start_cell(self.grid)
+        t["raster"] = time.perf_counter() - t0
+        with torch.inference_mode():
+            t0 = time.perf_counter()
+            image = torch.from_numpy(raster).float().div_(255.0)[None]
+            image = image.contiguous(memory_format=torch.channels_last)
+            reward = self.model(image, torch.from_numpy(motion)[None], torch.from_numpy(evidence)[None])
+            t["network"] = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            g = goal_log_map(torch.tensor([goal_cell]), self.grid.rows, self.grid.cols,
+                             self.goal_variance)
+            _, policy = spacetime_value_iteration(reward, g, st.max_forward, st.max_across)
+            t["vi"] = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        waypoints, _ = spacetime_plan(policy[0], start, self.grid, st.max_forward, st.max_across,
+                                      self.sampler, seed=(self.seed * 1_000_003 + self._calls) % 2**32)
+        t["sampler"] = time.perf_counter() - t0
+        self._calls += 1
+        t["total"] = sum(t.values())
+
+        plan = Plan(waypoints, reward[0, 0].numpy(), goal_map(goal_cell, self.grid, self.goal_variance),
+                    None, None, goal_cell, t, risk_steps=reward[0].numpy())
+
+        def visits() -> np.ndarray:     # figures and open-loop metrics only
+            return spacetime_visitation(policy, torch.tensor([start]), st.max_forward,
+                                        st.max_across)[0].numpy()
+
+        plan.svf_steps = visits
+        plan.svf = lambda: plan.svf_steps.sum(axis=0)
+        return plan

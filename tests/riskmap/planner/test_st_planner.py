@@ -1,0 +1,133 @@
+"""The space-time planner's network, IRL step and sampler (DESIGN §3b)."""
+
+import numpy as np
+import pytest
+import torch
+
+from rasterize.config import Extent, GridConfig
+from rasterize.errors import InputError
+from riskmap.planner.model import ModelConfig, RiskMapGenerator
+from riskmap.planner.st_irl import SpaceTimeIRLConfig, demo_one_hot, demo_step_nll, st_irl_step
+from riskmap.planner.st_model import SpaceTimeConfig, SpaceTimeRiskMapGenerator, state_from_spatial
+from riskmap.planner.st_sampler import sample_spacetime_paths, spacetime_plan, to_plan_steps
+from riskmap.planner.st_vi import spacetime_actions, spacetime_value_iteration, spacetime_visitation
+
+GRID = GridConfig(Extent(10.0, 10.0, 10.0, 10.0), rows=20, cols=20)     # 1 m cells, ego (10, 10)
+
+
+@pytest.mark.parametrize("bad", [dict(steps=5), dict(steps=0), dict(max_forward=0),
+                                 dict(max_forward=17), dict(max_across=-1), dict(max_across=9)])
+def test_out_of_range_steps_and_reach_are_input_errors(bad):
+    with pytest.raises(InputError):
+        SpaceTimeConfig(**bad)
+
+
+def test_started_from_a_spatial_network_it_gives_that_risk_map_at_every_step():
+    torch.manual_seed(0)
+    config = ModelConfig(in_channels=8, resolution=12)
+    spatial = RiskMapGenerator(config).eval()
+    st = SpaceTimeRiskMapGenerator(config, SpaceTimeConfig(steps=4)).eval()
+    st.load_state_dict(state_from_spatial(st, spatial.state_dict()))
+    raster, motion = torch.rand(2, 8, 48, 48), torch.rand(2, 3, 12, 12)
+    evidence = torch.rand(2, 4, 2, 12, 12)
+    with torch.no_grad():
+        r = st(raster, motion, evidence)
+        risk = spatial(raster, motion)
+    assert r.shape == (2, 4, 12, 12) and (r <= 0).all()
+    for t in range(4):
+        torch.testing.assert_close(r[:, t], risk, rtol=1e-5, atol=1e-5)
+    with pytest.raises(InputError, match="evidence"):
+        st(raster, motion, evidence[:, :3])
+
+
+def test_the_irl_gradient_is_the_contracts():
+    """∂loss/∂r_t = −(D_demo_t − D_t − v D_t ⊙ N_t) / B, and none at steps the human is off the grid."""
+    torch.manual_seed(1)
+    st = SpaceTimeConfig(steps=3, max_forward=2, max_across=1)
+    reward = (-torch.rand(2, 3, 6, 5, dtype=torch.float64)).requires_grad_()
+    batch = {"goal_cell": torch.tensor([[0, 2], [1, 1]]), "start_cell": torch.tensor([[5, 2], [4, 3]]),
+             "st_demo": torch.tensor([[[4, 2], [3, 2], [1, 2]], [[3, 3], [-1, -1], [1, 2]]]),
+             "st_uncertainty": torch.rand(2, 3, 6, 5, dtype=torch.float64)}
+    config = SpaceTimeIRLConfig(st, uncertainty_weight=0.7, goal_variance=2.0)
+    step = st_irl_step(reward, batch, config)
+    step.loss.backward()
+    from riskmap.planner.irl import goal_log_map
+
+    g = goal_log_map(batch["goal_cell"], 6, 5, 2.0, torch.float64)
+    _, policy = spacetime_value_iteration(reward.detach(), g, 2, 1)
+    visits = spacetime_visitation(policy, batch["start_cell"], 2, 1)
+    demo = demo_one_hot(batch["st_demo"], 6, 5, torch.float64)
+    expected = -(demo - visits - 0.7 * visits * batch["st_uncertainty"]) / 2
+    expected[1, 1] = 0.0                                     # the human off the grid at step 2
+    torch.testing.assert_close(reward.grad, expected)
+    assert demo[1, 1].sum() == 0 and demo[0, 2, 1, 2] == 1
+    nll = demo_step_nll(visits, batch["st_demo"])
+    assert nll.shape == (2,) and (nll > 0).all()
+
+
+def test_a_larger_uncertainty_weight_keeps_the_policy_off_where_others_will_be():
+    """Descending the loss with v > 0 lowers r_t where the policy meets N_t, more for larger v."""
+    st = SpaceTimeConfig(steps=3, max_forward=1, max_across=1)
+    base = torch.full((1, 3, 5, 3), -1.0, dtype=torch.float64)
+    unc = torch.zeros(1, 3, 5, 3, dtype=torch.float64)
+    unc[0, 1, 3, 1] = 1.0                                   # another agent at (3, 1) at step 2
+    batch = {"goal_cell": torch.tensor([[1, 1]]), "start_cell": torch.tensor([[4, 1]]),
+             "st_demo": torch.tensor([[[4, 1], [3, 1], [2, 1]]]), "st_uncertainty": unc}
+    drops = []
+    for v in (0.0, 1.0, 5.0):
+        reward = base.clone().requires_grad_()
+        st_irl_step(reward, batch, SpaceTimeIRLConfig(st, v, 1.0)).loss.backward()
+        drops.append(float(reward.grad[0, 1, 3, 1]))
+    assert drops[0] < drops[1] < drops[2]
+
+
+def test_sampled_paths_follow_the_policy_and_stay_on_the_grid():
+    steps, (k, lat) = 4, (2, 1)
+    actions = spacetime_actions(k, lat)
+    policy = torch.zeros(steps, len(actions), 20, 20, dtype=torch.float64)
+    forward_two = [i for i, a in enumerate(actions) if tuple(a) == (-2, 0)][0]
+    policy[:, forward_two] = 1.0                           # always 2 rows forward
+    flat = sample_spacetime_paths(policy, (10, 10), k, lat, 50, torch.Generator().manual_seed(0))
+    np.testing.assert_array_equal(flat[0], [210, 170, 130, 90, 50])
+    waypoints, members = spacetime_plan(policy, (10, 10), GRID, k, lat, seed=0)
+    # 2 m per 1.5 s step (T = 4 over 6 s), interpolated to 0.5 s: 2/3 m per waypoint
+    np.testing.assert_allclose(waypoints[:, 0], np.arange(1, 13) * 2 / 3)
+    np.testing.assert_allclose(waypoints[:, 1], 0.0)
+    # a policy that spreads its mass samples every action, never one off the grid
+    value, policy = spacetime_value_iteration(torch.zeros(1, 4, 3, 3, dtype=torch.float64),
+                                              torch.zeros(1, 3, 3, dtype=torch.float64), 2, 1)
+    flat = sample_spacetime_paths(policy[0], (2, 0), 2, 1, 2000, torch.Generator().manual_seed(1))
+    rows, cols = np.divmod(flat, 3)
+    assert (rows >= 0).all() and (cols >= 0).all() and (cols < 3).all()
+    assert len(np.unique(flat[:, 1])) == 6          # from the corner: 2 columns x (stay, 1, 2 forward)
+
+
+def test_a_waiting_policy_plans_to_stand():
+    actions = spacetime_actions(2, 1)
+    stay = [i for i, a in enumerate(actions) if tuple(a) == (0, 0)][0]
+    policy = torch.zeros(12, len(actions), 20, 20)
+    policy[:, stay] = 1.0
+    waypoints, _ = spacetime_plan(policy, (10, 10), GRID, 2, 1, seed=3)
+    np.testing.assert_array_equal(waypoints, np.zeros((12, 2)))
+
+
+def test_the_plan_is_the_largest_clusters_mean_between_cell_centres():
+    """Half the paths move 1 row a step, half 2 rows: one cluster each unless merged; with a
+    single cluster the plan is their mean, 1.5 m a step, between the cells."""
+    from riskmap.planner.st_sampler import SpaceTimeSamplerConfig
+
+    actions = spacetime_actions(2, 0)
+    policy = torch.zeros(12, len(actions), 20, 20, dtype=torch.float64)
+    policy[0, 1], policy[0, 2] = 0.5, 0.5                       # first step: 1 or 2 forward
+    policy[1:, 0] = 1.0                                          # then stand
+    waypoints, _ = spacetime_plan(policy, (10, 10), GRID, 2, 0, SpaceTimeSamplerConfig(4000, 1))
+    assert 1.45 < waypoints[0, 0] < 1.55 and np.allclose(waypoints[1:], waypoints[0])
+
+
+def test_coarser_steps_are_interpolated_to_the_plans_twelve():
+    points = np.array([[3.0, 0.0], [6.0, 1.0], [9.0, 1.0]])     # T = 3: 2 s apart
+    plan = to_plan_steps(points)
+    assert plan.shape == (12, 2)
+    np.testing.assert_allclose(plan[3], [3.0, 0.0])
+    np.testing.assert_allclose(plan[0], [0.75, 0.0])
+    np.testing.assert_allclose(plan[-1], [9.0, 1.0])
