@@ -136,7 +136,11 @@ def save_plan_panels(scene: Scene, plan, config: RasterConfig, grid, path: Path,
     axes[0].imshow(raster_to_rgb(rasterize_scene(scene, config)), extent=extent, aspect="auto",
                    interpolation="nearest")
     axes[0].set_title("BEV raster")
-    panels = [(plan.risk_map, "risk map (reward, <= 0)", "magma"),
+    # Reads risk_map, goal_map, svf and waypoints only (never `policy`, which a space-time plan
+    # leaves None); for a space-time plan risk_map is r_1 and svf the sum of its D_t.
+    spacetime = has_spacetime(plan)
+    panels = [(plan.risk_map, "risk map r_1 (reward now, <= 0)" if spacetime
+               else "risk map (reward, <= 0)", "magma"),
               (plan.goal_map, "goal map", "viridis"),
               (np.log10(np.maximum(plan.svf, 1e-4)), "SVF (log10 expected visits)", "inferno")]
     for ax, (image, name, cmap) in zip(axes[1:4], panels):
@@ -189,7 +193,108 @@ def plan_figures(checkpoint: Path, data: Path, out: Path, count: int, seed: int 
                  f"ADE {ade:.1f} m, plan {1000 * plan.timings_s['total']:.0f} ms")
         paths.append(save_plan_panels(scene, plan, planner.raster, planner.grid,
                                       Path(out) / f"plan_{i:05d}.png", title))
+        if has_spacetime(plan):
+            paths.append(save_spacetime_strip(plan, planner.grid,
+                                              Path(out) / f"plan_{i:05d}_steps.png", title,
+                                              demo_xy=demo))
     return paths
+
+
+def has_spacetime(plan) -> bool:
+    """Whether a plan comes from a space-time planner (it carries r_t per step, `risk_steps`)."""
+    return getattr(plan, "risk_steps", None) is not None
+
+
+def save_spacetime_strip(plan, grid, path: Path, title: str = "",
+                         demo_xy: np.ndarray | None = None, every: int | None = None) -> Path:
+    """A space-time plan over time, in two rows of panels: on top the reward map r_t of each
+    shown step (one colour scale for all), below the visitation D_t (probability that the ego is
+    in each cell at step t, log10, one scale for all). Step t of T lies t * 6 / T s ahead; every
+    panel marks the plan's waypoint at that time (index round(t_s / 0.5) - 1) and, if `demo_xy`
+    ([12, 2] ego metres) is given, where the demonstration was then.
+
+    `every`: show every `every`-th step, ending at the last; None shows at most about six
+    (every second step of 12). Same imshow conventions as `save_plan_panels`' risk-map panel.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.lines import Line2D
+
+    from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS
+
+    risk = np.asarray(plan.risk_steps, dtype=np.float64)
+    visits = plan.svf_steps
+    steps = len(risk)
+    if every is None:
+        every = max(1, -(-steps // 6))
+    if not (isinstance(every, (int, np.integer)) and every >= 1):
+        raise ValueError(f"every={every!r}: must be an integer >= 1")
+    shown = list(range(steps, 0, -every))[::-1]          # 1-based steps, ending at the last
+    horizon_s = PLAN_STEPS * PLAN_DT_S
+
+    ext = grid.extent
+    extent = (ext.left_m, -ext.right_m, -ext.back_m, ext.front_m)
+    chosen = risk[[t - 1 for t in shown]]
+    r_low, r_high = float(chosen.min()), float(chosen.max())
+    if r_high - r_low < 1e-9:
+        r_low -= 1.0
+    floor = 1e-4
+    v_low, v_high = np.log10(floor), 0.0
+
+    cols = len(shown)
+    fig, axes = plt.subplots(2, cols + 1, figsize=(2.3 * cols + 1.2, 8.4), dpi=100, squeeze=False,
+                             gridspec_kw={"width_ratios": [1.0] * cols + [0.07]})
+    plan_path = np.concatenate([[[0.0, 0.0]], plan.waypoints])
+    demo_path = None if demo_xy is None else np.concatenate([[[0.0, 0.0]], demo_xy])
+    r_image = d_image = None
+    for k, t in enumerate(shown):
+        t_s = t * horizon_s / steps
+        index = int(round(t_s / PLAN_DT_S)) - 1
+        top, bottom = axes[0, k], axes[1, k]
+        r_image = top.imshow(risk[t - 1], extent=extent, aspect="auto", cmap="magma",
+                             interpolation="nearest", vmin=r_low, vmax=r_high)
+        top.set_title(f"t = {t_s:.1f} s", fontsize=11)
+        if visits is not None:
+            d = np.log10(np.maximum(np.asarray(visits[t - 1], dtype=np.float64), floor))
+            d_image = bottom.imshow(d, extent=extent, aspect="auto", cmap="inferno",
+                                    interpolation="nearest", vmin=v_low, vmax=v_high)
+        else:
+            bottom.text(0.5, 0.5, "no visitation", transform=bottom.transAxes, ha="center")
+        for ax in (top, bottom):
+            if demo_path is not None:
+                ax.plot(demo_path[:, 1], demo_path[:, 0], "-", color="#3ddc84", lw=0.9, alpha=0.6)
+            ax.plot(plan_path[:, 1], plan_path[:, 0], "-", color="#ff66ff", lw=0.9, alpha=0.6)
+            if demo_xy is not None and 0 <= index < len(demo_xy):
+                ax.plot(demo_xy[index, 1], demo_xy[index, 0], "s", color="#3ddc84", ms=8,
+                        mec="black", mew=1.0)
+            if 0 <= index < len(plan.waypoints):
+                ax.plot(plan.waypoints[index, 1], plan.waypoints[index, 0], "o", color="#ff66ff",
+                        ms=8, mec="white", mew=1.2)
+            ax.set_xlim(ext.left_m, -ext.right_m)
+            ax.set_ylim(-ext.back_m, ext.front_m)
+            ax.tick_params(labelsize=8)
+            if k:
+                ax.tick_params(labelleft=False)
+        bottom.set_xlabel("lateral y (m)", fontsize=9)
+    axes[0, 0].set_ylabel("reward r_t\nforward x (m)", fontsize=10)
+    axes[1, 0].set_ylabel("visitation D_t\nforward x (m)", fontsize=10)
+    fig.colorbar(r_image, cax=axes[0, -1]).set_label("reward r_t (<= 0)", fontsize=9)
+    if d_image is not None:
+        fig.colorbar(d_image, cax=axes[1, -1]).set_label("log10 P(ego in cell)", fontsize=9)
+    else:
+        axes[1, -1].axis("off")
+    handles = [Line2D([], [], color="#ff66ff", marker="o", ms=7, mec="white", lw=0.9,
+                      label="plan at t")]
+    if demo_xy is not None:
+        handles.append(Line2D([], [], color="#3ddc84", marker="s", ms=7, mec="black", lw=0.9,
+                              label="demonstration at t"))
+    axes[0, 0].legend(handles=handles, loc="lower left", fontsize=7.5, framealpha=0.85)
+    fig.suptitle((title + "\n" if title else "")
+                 + f"space-time plan: reward r_t and visitation D_t, {steps} steps over "
+                 f"{horizon_s:g} s", fontsize=10)
+    return _save(fig, path)
 
 
 def plan_frame_writer(out_dir: Path, planner, stem: str, label: str):

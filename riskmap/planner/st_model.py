@@ -44,13 +44,13 @@ class SpaceTimeConfig:
 
     def __post_init__(self) -> None:
         if not isinstance(self.steps, int) or self.steps < 1 or PLAN_STEPS % self.steps:
-            raise InputError(f"space-time steps T={self.steps!r}: must divide the plan's "
+            raise InputError(f"--steps {self.steps!r}: space-time steps must divide the plan's "
                              f"{PLAN_STEPS} waypoints (1, 2, 3, 4, 6 or 12)")
         if not isinstance(self.max_forward, int) or not 1 <= self.max_forward <= MAX_FORWARD_CELLS:
-            raise InputError(f"--max-forward K={self.max_forward!r}: must be 1 … {MAX_FORWARD_CELLS} "
+            raise InputError(f"--max-forward {self.max_forward!r}: must be 1 … {MAX_FORWARD_CELLS} "
                              "cells per step")
         if not isinstance(self.max_across, int) or not 0 <= self.max_across <= MAX_ACROSS_CELLS:
-            raise InputError(f"--max-across L={self.max_across!r}: must be 0 … {MAX_ACROSS_CELLS} "
+            raise InputError(f"--max-across {self.max_across!r}: must be 0 … {MAX_ACROSS_CELLS} "
                              "cells per step")
 
     @property

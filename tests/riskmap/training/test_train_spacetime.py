@@ -1,0 +1,83 @@
+"""`riskmap train --planner spacetime`: a tiny run, its checkpoint, resume, and the kinds kept apart."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+from safetensors.torch import load_file
+
+from rasterize.errors import InputError
+from riskmap.data.dataset import DemoDataset
+from riskmap.planner.model import load_model
+from riskmap.planner.riskmap_planner import RiskMapPlanner, load_planner
+from riskmap.planner.st_model import load_spacetime_model
+from riskmap.planner.st_planner import SpaceTimePlanner
+from riskmap.registry import make_planner
+from riskmap.training.train import train
+from tests.riskmap.conftest import tiny_train_config
+
+ST = dict(planner="spacetime", steps=6, max_forward=3, max_across=2)
+
+
+@pytest.fixture(scope="module")
+def st_checkpoint(tiny_dataset, tiny_checkpoint, tmp_path_factory):
+    """Fine-tuned from the tiny spatial checkpoint, as the shipped ones are."""
+    out = tmp_path_factory.mktemp("st") / "run"
+    train(tiny_train_config(tiny_dataset, out, epochs=1, init_checkpoint=str(tiny_checkpoint), **ST),
+          progress=False)
+    return out / "best"
+
+
+def test_a_spacetime_run_writes_a_checkpoint_that_plans(st_checkpoint, tiny_dataset):
+    side = json.loads(st_checkpoint.with_suffix(".json").read_text())
+    assert side["planner"] == "spacetime"
+    assert side["spacetime"] == {"steps": 6, "max_forward": 3, "max_across": 2}
+    assert np.isfinite(side["metrics"]["val_nll"]) and np.isfinite(side["metrics"]["val_ade_m"])
+    planner = make_planner(f"riskmap:{st_checkpoint}", seed=2)
+    assert isinstance(planner, SpaceTimePlanner)
+    scene = DemoDataset(tiny_dataset).scene(0)
+    plan = planner.plan(scene)
+    again = load_planner(st_checkpoint, seed=2).plan(scene)
+    np.testing.assert_array_equal(plan.waypoints, again.waypoints)
+    assert plan.waypoints.shape == (12, 2) and np.isfinite(plan.waypoints).all()
+    assert plan.risk_steps.shape == (6, 25, 25) and (plan.risk_steps <= 0).all()
+    np.testing.assert_array_equal(plan.risk_map, plan.risk_steps[0])
+    np.testing.assert_allclose(plan.svf_steps.sum(axis=(1, 2)), 1.0, rtol=1e-5)
+    np.testing.assert_allclose(plan.svf, plan.svf_steps.sum(axis=0), rtol=1e-6)
+    assert set(plan.timings_s) >= {"raster", "network", "vi", "sampler", "total", "svf"}
+
+
+def test_the_two_kinds_are_not_mistaken_for_each_other(st_checkpoint, tiny_checkpoint):
+    with pytest.raises(InputError, match="space-time planner; this needs a spatial"):
+        load_model(st_checkpoint)
+    with pytest.raises(InputError, match="spatial risk-map planner; this needs a space-time"):
+        load_spacetime_model(tiny_checkpoint)
+    assert isinstance(load_planner(tiny_checkpoint), RiskMapPlanner)
+
+
+def test_a_spacetime_run_resumes_exactly(tiny_dataset, tmp_path):
+    full, cut = tmp_path / "full", tmp_path / "cut"
+    settings = dict(max_windows=4, val_ade_windows=1, **ST)
+    train(tiny_train_config(tiny_dataset, full, epochs=2, **settings), progress=False)
+    train(tiny_train_config(tiny_dataset, cut, epochs=1, **settings), progress=False)
+    train(tiny_train_config(tiny_dataset, cut, epochs=2, **settings), resume=True, progress=False)
+    a, b = load_file(str(full / "last.safetensors")), load_file(str(cut / "last.safetensors"))
+    for key in a:
+        torch.testing.assert_close(a[key], b[key], rtol=0, atol=0)
+
+
+def test_the_reach_comes_from_the_data_when_not_given(tiny_dataset, tmp_path):
+    train(tiny_train_config(tiny_dataset, tmp_path / "r", epochs=1, max_windows=4,
+                            val_ade_windows=1, planner="spacetime"), progress=False)
+    side = json.loads((tmp_path / "r" / "last.json").read_text())
+    reach = side["spacetime_reach"]
+    assert side["spacetime"]["max_forward"] >= 1 and reach["windows"] > 0
+    assert side["spacetime"]["max_forward"] <= max(1, reach["forward_max"])
+
+
+@pytest.mark.parametrize("clash", [dict(timing_head=True), dict(goal="demo"),
+                                   dict(risk_goal_threshold=-3.0)])
+def test_spatial_only_settings_are_refused(tiny_dataset, tmp_path, clash):
+    with pytest.raises(InputError, match="--planner spacetime"):
+        tiny_train_config(tiny_dataset, tmp_path / "x", planner="spacetime", **clash)
