@@ -4,6 +4,7 @@
     features ⊕ motion [B, 3, G, G] ─ 1×1 conv ─────────────────► base [B, h, G, G]     (once)
     evidence_t [B, E, G, G] ⊕ t/T ─ 3×3 conv ──────────────────► step_t [B, h, G, G]   (per step)
     ReLU(base + step_t) ─ 1×1 convs h→h→1 ─ LogSigmoid ────────► r_t [B, G, G] ≤ 0,  t = 1 … T
+    features ⊕ motion ⊕ route goal [B, 1, G, G] ─ 1×1 conv ─ LogSigmoid ─► g [B, G, G] ≤ 0
 
 The encoder and the layers of the head are the spatial generator's (`RiskMapGenerator`, the
 paper's): its first 1×1 convolution splits into the part that reads the features and motion
@@ -12,6 +13,13 @@ agents' predicted footprints and the red stop lines at step t, `rasterize.spacet
 time t/T. The 3×3 kernel lets a cell see an agent predicted in the cell next to it. Initialised
 from a spatial checkpoint with the step part at zero, it computes that checkpoint's risk map at
 every step, and training adds when.
+
+The goal map g (the value of ending the 6 s in a cell) is learned too, from the route rule's
+goal (a Gaussian in [0, 1], `rasterize.maps.goal_map`) and the features. A fixed route goal
+fixes the speed: every path must end near it at step T, and a wait that leaves the ego 20 cells
+short costs 20²/(2σ²) = 40 nats at σ² = 5, more than any step's reward can pay back. Learned, g
+can say "the route goal, unless the way there is about to be taken". It starts as
+logsigmoid(20 · route goal − 10): 0 on the route goal, −10 far from it.
 """
 
 from __future__ import annotations
@@ -76,10 +84,14 @@ class SpaceTimeRiskMapGenerator(RiskMapGenerator):
             "step": nn.Conv2d(len(EVIDENCE_CHANNELS) + 1, h, 3, padding=1, bias=False),
             "rest": nn.Sequential(nn.ReLU(inplace=True), nn.Conv2d(h, h, 1), nn.ReLU(inplace=True),
                                   nn.Conv2d(h, 1, 1)),
+            "goal": nn.Conv2d(config.encoder_channels + 3 + 1, 1, 1),
         })
+        _route_goal_start(self.head["goal"])
 
-    def forward(self, raster: torch.Tensor, motion: torch.Tensor, evidence: torch.Tensor
-                ) -> torch.Tensor:
+    def forward(self, raster: torch.Tensor, motion: torch.Tensor, evidence: torch.Tensor,
+                route_goal: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(rewards r_1 … r_T [B, T, G, G], goal map g [B, G, G]), both ≤ 0 (log space);
+        route_goal [B, G, G] is the route rule's goal map in [0, 1]."""
         g, steps = self.config.resolution, self.spacetime.steps
         b = raster.shape[0]
         if evidence.shape[1:] != (steps, len(EVIDENCE_CHANNELS), g, g):
@@ -90,7 +102,9 @@ class SpaceTimeRiskMapGenerator(RiskMapGenerator):
             mode = "area" if features.shape[-1] > g else "bilinear"
             features = F.interpolate(features, size=(g, g), mode=mode,
                                      **({} if mode == "area" else {"align_corners": False}))
-        base = self.head["base"](torch.cat([features, motion], dim=1))          # [B, h, G, G]
+        inputs = torch.cat([features, motion], dim=1)
+        base = self.head["base"](inputs)                                        # [B, h, G, G]
+        goal = F.logsigmoid(self.head["goal"](torch.cat([inputs, route_goal[:, None]], dim=1)))
         time = torch.arange(1, steps + 1, dtype=evidence.dtype, device=evidence.device) / steps
         time = time.view(1, steps, 1, 1, 1).expand(b, steps, 1, g, g)
         step_in = torch.cat([evidence, time], dim=2).flatten(0, 1)             # [B T, E + 1, G, G]
@@ -98,7 +112,18 @@ class SpaceTimeRiskMapGenerator(RiskMapGenerator):
             if base.is_contiguous(memory_format=torch.channels_last) else step_in
         hidden = self.head["step"](step_in).unflatten(0, (b, steps)) + base[:, None]
         logits = self.head["rest"](hidden.flatten(0, 1)).view(b, steps, g, g)
-        return F.logsigmoid(logits)
+        return F.logsigmoid(logits), goal[:, 0]
+
+
+ROUTE_GOAL_GAIN, ROUTE_GOAL_OFFSET = 20.0, -10.0     # the goal head's start (module docstring)
+
+
+def _route_goal_start(conv: nn.Conv2d) -> None:
+    """The goal head computing logsigmoid(20 · route goal − 10): the route channel is the last."""
+    with torch.no_grad():
+        conv.weight.zero_()
+        conv.weight[0, -1] = ROUTE_GOAL_GAIN
+        conv.bias.fill_(ROUTE_GOAL_OFFSET)
 
 
 def state_from_spatial(model: SpaceTimeRiskMapGenerator, spatial_state: dict) -> dict:

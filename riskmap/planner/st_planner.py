@@ -3,7 +3,8 @@ iteration in space-time → time-indexed policy → sampled positions at each st
 
 It decides where *and when*: standing still and slowing are actions, and a cell another agent
 is predicted to take at step t can be cheap before and after t and costly at t. The goal map is
-the route rule's, as the spatial planner's (`RiskMapPlanner`).
+learned from the route rule's (the network's input; `riskmap.planner.st_model`); the plan's
+`goal_map` is exp(g), in (0, 1].
 """
 
 from __future__ import annotations
@@ -21,7 +22,6 @@ from rasterize.raster import rasterize_scene
 from rasterize.scene import Scene
 from rasterize.spacetime import quantised, step_evidence
 from riskmap.infra.checkpoint import route_settings_of
-from riskmap.planner.irl import goal_log_map
 from riskmap.planner.st_model import SpaceTimeConfig, load_spacetime_model
 from riskmap.planner.st_sampler import SpaceTimeSamplerConfig, spacetime_plan
 from riskmap.planner.st_vi import spacetime_value_iteration, spacetime_visitation
@@ -72,11 +72,12 @@ class SpaceTimePlanner:
         st = self.spacetime
         evidence = quantised(step_evidence(scene, self.grid, st.steps, st.step_s, self.sigma_x,
                                            self.sigma_y)).astype(np.float32) / 255.0
+        route = goal_map(route_goal_cell(scene, self.grid), self.grid, self.goal_variance)
         with torch.inference_mode():
             image = torch.from_numpy(rasterize_scene(scene, self.raster)).float().div_(255.0)[None]
             image = image.contiguous(memory_format=torch.channels_last)
-            reward = self.model(image, torch.from_numpy(motion_features(scene, self.grid))[None],
-                                torch.from_numpy(evidence)[None])
+            reward, _ = self.model(image, torch.from_numpy(motion_features(scene, self.grid))[None],
+                                   torch.from_numpy(evidence)[None], torch.from_numpy(route)[None])
         return reward[0].numpy(), evidence
 
     def plan(self, scene: Scene) -> Plan:
@@ -88,16 +89,16 @@ class SpaceTimePlanner:
         evidence = quantised(step_evidence(scene, self.grid, st.steps, st.step_s, self.sigma_x,
                                            self.sigma_y)).astype(np.float32) / 255.0
         goal_cell, start = route_goal_cell(scene, self.grid), start_cell(self.grid)
+        route = goal_map(goal_cell, self.grid, self.goal_variance)
         t["raster"] = time.perf_counter() - t0
         with torch.inference_mode():
             t0 = time.perf_counter()
             image = torch.from_numpy(raster).float().div_(255.0)[None]
             image = image.contiguous(memory_format=torch.channels_last)
-            reward = self.model(image, torch.from_numpy(motion)[None], torch.from_numpy(evidence)[None])
+            reward, g = self.model(image, torch.from_numpy(motion)[None],
+                                   torch.from_numpy(evidence)[None], torch.from_numpy(route)[None])
             t["network"] = time.perf_counter() - t0
             t0 = time.perf_counter()
-            g = goal_log_map(torch.tensor([goal_cell]), self.grid.rows, self.grid.cols,
-                             self.goal_variance)
             _, policy = spacetime_value_iteration(reward, g, st.max_forward, st.max_across)
             t["vi"] = time.perf_counter() - t0
         t0 = time.perf_counter()
@@ -107,8 +108,8 @@ class SpaceTimePlanner:
         self._calls += 1
         t["total"] = sum(t.values())
 
-        plan = Plan(waypoints, reward[0, 0].numpy(), goal_map(goal_cell, self.grid, self.goal_variance),
-                    None, None, goal_cell, t, risk_steps=reward[0].numpy())
+        plan = Plan(waypoints, reward[0, 0].numpy(), np.exp(g[0].numpy()), None, None, goal_cell, t,
+                    risk_steps=reward[0].numpy())
 
         def visits() -> np.ndarray:     # figures and open-loop metrics only
             return spacetime_visitation(policy, torch.tensor([start]), st.max_forward,

@@ -102,9 +102,9 @@ def build_model(model_config: ModelConfig, st: SpaceTimeConfig, init_checkpoint:
     return model
 
 
-def forward(model, batch: dict) -> torch.Tensor:
-    """Rewards [B, T, G, G] of a batch."""
-    return model(batch["raster"], batch["motion"], batch["st_evidence"])
+def forward(model, batch: dict) -> tuple[torch.Tensor, torch.Tensor]:
+    """(rewards [B, T, G, G], goal map [B, G, G]) of a batch."""
+    return model(batch["raster"], batch["motion"], batch["st_evidence"], batch["goal_map"])
 
 
 def irl_config(config, st: SpaceTimeConfig, goal_variance: float) -> SpaceTimeIRLConfig:
@@ -113,7 +113,7 @@ def irl_config(config, st: SpaceTimeConfig, goal_variance: float) -> SpaceTimeIR
 
 def train_step(model, batch: dict, irl: SpaceTimeIRLConfig) -> tuple[torch.Tensor, float]:
     """(loss to descend, the batch's mean demonstration NLL per step)."""
-    step = st_irl_step(forward(model, batch), batch, irl)
+    step = st_irl_step(*forward(model, batch), batch, irl)
     return step.loss, float(demo_step_nll(step.visitation, batch["st_demo"]).mean())
 
 
@@ -127,7 +127,7 @@ def evaluate(model, loader, config, irl: SpaceTimeIRLConfig, grid, device, to) -
     with torch.no_grad():
         for batch in loader:
             batch = to(batch)
-            step = st_irl_step(forward(model, batch), batch, irl)
+            step = st_irl_step(*forward(model, batch), batch, irl)
             nll.append(demo_step_nll(step.visitation, batch["st_demo"]).cpu())
             for i in range(step.policy.shape[0]):
                 if seen >= config.val_ade_windows:

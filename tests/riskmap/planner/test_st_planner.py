@@ -29,19 +29,22 @@ def test_started_from_a_spatial_network_it_gives_that_risk_map_at_every_step():
     st = SpaceTimeRiskMapGenerator(config, SpaceTimeConfig(steps=4)).eval()
     st.load_state_dict(state_from_spatial(st, spatial.state_dict()))
     raster, motion = torch.rand(2, 8, 48, 48), torch.rand(2, 3, 12, 12)
-    evidence = torch.rand(2, 4, 2, 12, 12)
+    evidence, route = torch.rand(2, 4, 2, 12, 12), torch.rand(2, 12, 12)
     with torch.no_grad():
-        r = st(raster, motion, evidence)
+        r, g = st(raster, motion, evidence, route)
         risk = spatial(raster, motion)
     assert r.shape == (2, 4, 12, 12) and (r <= 0).all()
     for t in range(4):
         torch.testing.assert_close(r[:, t], risk, rtol=1e-5, atol=1e-5)
+    # the goal starts as logsigmoid(20 · route goal − 10): 0 on the route's goal, −10 far away
+    torch.testing.assert_close(g, torch.nn.functional.logsigmoid(20 * route - 10))
     with pytest.raises(InputError, match="evidence"):
-        st(raster, motion, evidence[:, :3])
+        st(raster, motion, evidence[:, :3], route)
 
 
 def test_the_irl_gradient_is_the_contracts():
-    """∂loss/∂r_t = −(D_demo_t − D_t − v D_t ⊙ N_t) / B, and none at steps the human is off the grid."""
+    """∂loss/∂r_t = −(D_demo_t − D_t − v D_t ⊙ N_t) / B, none at steps the human is off the grid,
+    and ∂loss/∂g = −(D_demo_T − D_T) / B."""
     torch.manual_seed(1)
     st = SpaceTimeConfig(steps=3, max_forward=2, max_across=1)
     reward = (-torch.rand(2, 3, 6, 5, dtype=torch.float64)).requires_grad_()
@@ -49,17 +52,18 @@ def test_the_irl_gradient_is_the_contracts():
              "st_demo": torch.tensor([[[4, 2], [3, 2], [1, 2]], [[3, 3], [-1, -1], [1, 2]]]),
              "st_uncertainty": torch.rand(2, 3, 6, 5, dtype=torch.float64)}
     config = SpaceTimeIRLConfig(st, uncertainty_weight=0.7, goal_variance=2.0)
-    step = st_irl_step(reward, batch, config)
-    step.loss.backward()
     from riskmap.planner.irl import goal_log_map
 
-    g = goal_log_map(batch["goal_cell"], 6, 5, 2.0, torch.float64)
-    _, policy = spacetime_value_iteration(reward.detach(), g, 2, 1)
+    g = goal_log_map(batch["goal_cell"], 6, 5, 2.0, torch.float64).requires_grad_()
+    step = st_irl_step(reward, g, batch, config)
+    step.loss.backward()
+    _, policy = spacetime_value_iteration(reward.detach(), g.detach(), 2, 1)
     visits = spacetime_visitation(policy, batch["start_cell"], 2, 1)
     demo = demo_one_hot(batch["st_demo"], 6, 5, torch.float64)
     expected = -(demo - visits - 0.7 * visits * batch["st_uncertainty"]) / 2
     expected[1, 1] = 0.0                                     # the human off the grid at step 2
     torch.testing.assert_close(reward.grad, expected)
+    torch.testing.assert_close(g.grad, -(demo[:, -1] - visits[:, -1]) / 2)
     assert demo[1, 1].sum() == 0 and demo[0, 2, 1, 2] == 1
     nll = demo_step_nll(visits, batch["st_demo"])
     assert nll.shape == (2,) and (nll > 0).all()
@@ -76,7 +80,8 @@ def test_a_larger_uncertainty_weight_keeps_the_policy_off_where_others_will_be()
     drops = []
     for v in (0.0, 1.0, 5.0):
         reward = base.clone().requires_grad_()
-        st_irl_step(reward, batch, SpaceTimeIRLConfig(st, v, 1.0)).loss.backward()
+        goal = torch.zeros(1, 5, 3, dtype=torch.float64)
+        st_irl_step(reward, goal, batch, SpaceTimeIRLConfig(st, v, 1.0)).loss.backward()
         drops.append(float(reward.grad[0, 1, 3, 1]))
     assert drops[0] < drops[1] < drops[2]
 
