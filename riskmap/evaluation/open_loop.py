@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rasterize.errors import InputError
 from rasterize.frames import ego_from_grid, ego_from_world, ego_pose
 from rasterize.maps import uncertainty_map
 from riskmap.data.dataset import DemoDataset, with_human_goal
@@ -68,6 +69,9 @@ def evaluate(checkpoint: Path, data: Path, limit: int | None = None, seed: int =
 
     planner = load_planner(checkpoint, seed=seed, goal_variance=goal_variance)
     changes = {k: v for k, v in (("timing", timing), ("keep_gap", keep_gap)) if v is not None}
+    if changes and not isinstance(planner, RiskMapPlanner):
+        raise InputError(f"checkpoint {checkpoint} is a space-time planner, which times its plan "
+                         "itself; drop --timing and --keep-gap")
     planner.sampler = dataclasses.replace(planner.sampler, **changes)
     side = read_sidecar(checkpoint)
     sx, sy = side["maps"]["sigma_x"], side["maps"]["sigma_y"]

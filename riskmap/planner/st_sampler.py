@@ -48,17 +48,18 @@ def sample_spacetime_paths(policy: torch.Tensor | np.ndarray, start: tuple[int, 
     if len(actions) != a:
         raise ValueError(f"policy has {a} actions, K={max_forward}, L={max_across} make {len(actions)}")
     shift = actions[:, 0] * w + actions[:, 1]
-    cdf = np.cumsum(policy.astype(np.float64), axis=1)
-    # Once a cell's cumulative probability has reached 1 (up to rounding), the actions after it
-    # (off the grid, or under 1e-12 together) are never drawn: their thresholds lie above any draw.
-    cdf[cdf >= cdf[:, -1:] - 1e-12] = 2.0
-    cdf = cdf[:, :-1]                                                         # [T, A − 1, G, G]
-    cdf = cdf.reshape(steps, a - 1, h * w).transpose(0, 2, 1)                  # [T, G G, A − 1]
+    flat_policy = policy.reshape(steps, a, h * w)
     uniforms = torch.rand((steps, samples, 1), generator=generator, dtype=torch.float64).numpy()
     flat = np.empty((samples, steps + 1), np.int64)
     flat[:, 0] = start[0] * w + start[1]
     for t in range(steps):
-        action = (uniforms[t] >= cdf[t, flat[:, t]]).sum(axis=1)
+        # Only the cells some path is in: a few dozen, where the policy has thousands.
+        cells, which = np.unique(flat[:, t], return_inverse=True)
+        cdf = np.cumsum(flat_policy[t][:, cells].astype(np.float64), axis=0).T     # [U, A]
+        # Once a cell's cumulative probability has reached 1 (up to rounding), the actions after
+        # it (off the grid, or under 1e-12 together) are never drawn: thresholds above any draw.
+        cdf[cdf >= cdf[:, -1:] - 1e-12] = 2.0
+        action = (uniforms[t] >= cdf[which, :-1]).sum(axis=1)
         flat[:, t + 1] = flat[:, t] + shift[action]
     return flat
 
