@@ -10,6 +10,7 @@ learned from the route rule's (the network's input; `riskmap.planner.st_model`);
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -17,7 +18,7 @@ import torch
 
 from rasterize.config import GridConfig, RasterConfig
 from rasterize.errors import InputError
-from rasterize.maps import goal_map, motion_features, route_goal_cell, start_cell
+from rasterize.maps import goal_map, motion_features, route_goal_cell, start_cell, uncertainty_map
 from rasterize.raster import rasterize_scene
 from rasterize.scene import Scene
 from rasterize.spacetime import quantised, step_evidence
@@ -26,6 +27,31 @@ from riskmap.planner.st_model import SpaceTimeConfig, load_spacetime_model
 from riskmap.planner.st_sampler import SpaceTimeSamplerConfig, spacetime_plan
 from riskmap.planner.st_vi import spacetime_value_iteration, spacetime_visitation
 from riskmap.sim.plan import Plan
+
+
+@dataclass(frozen=True)
+class TimeGapConfig:
+    """A planning-time price on following too closely, from the per-step evidence alone: the
+    cells another agent is predicted to cover within the `time_gap_s` seconds up to step t (its
+    footprints at steps t − k … t, k = time_gap_s / step; step 0 is now) cost `weight` × that
+    footprint at step t. Being where a car was 1 s earlier is a 1 s time gap, so this keeps a
+    headway behind a leader and a margin behind a car clearing a crossing. Off (weight 0) unless a
+    checkpoint's sidecar `planning.time_gap` names it (measured in experiments/README.md)."""
+
+    time_gap_s: float = 1.0
+    weight: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not (0.0 <= self.time_gap_s <= 6.0 and 0.0 <= self.weight < float("inf")):
+            raise InputError(f"planning time_gap {self}: time_gap_s must be 0 … 6 s and weight "
+                             ">= 0; fix the sidecar's planning.time_gap")
+
+    def penalty(self, now: np.ndarray, predicted: np.ndarray, step_s: float) -> np.ndarray:
+        """[T, G, G] to subtract from r_1 … r_T: `now` [G, G] and `predicted` [T, G, G] in [0, 1]."""
+        seq = np.concatenate([now[None], predicted])                  # steps 0 … T
+        k = int(round(self.time_gap_s / step_s))
+        shadow = np.stack([seq[max(0, t - k): t + 1].max(axis=0) for t in range(1, len(seq))])
+        return self.weight * shadow
 
 
 class SpaceTimePlanner:
@@ -43,6 +69,7 @@ class SpaceTimePlanner:
         self.sigma_x, self.sigma_y = sigma_x, sigma_y
         self.sampler, self.seed = sampler, seed
         self.route_settings: dict | None = None   # route rule of recorded training data, if any
+        self.time_gap = TimeGapConfig()            # off; see TimeGapConfig
         self._calls = 0
 
     @classmethod
@@ -61,6 +88,12 @@ class SpaceTimePlanner:
                       side["maps"]["sigma_y"], SpaceTimeSamplerConfig(**side.get("sampler", {})),
                       seed)
         planner.route_settings = route_settings_of(side)
+        settings = side.get("planning", {}).get("time_gap")
+        if settings is not None:
+            if not isinstance(settings, dict) or set(settings) - {"time_gap_s", "weight"}:
+                raise InputError(f"the sidecar's planning.time_gap {settings!r} is not a mapping of "
+                                 "time_gap_s, weight; fix or remove it")
+            planner.time_gap = TimeGapConfig(**settings)
         return planner
 
     def reset(self, scene: Scene) -> None:
@@ -99,6 +132,10 @@ class SpaceTimePlanner:
                                    torch.from_numpy(evidence)[None], torch.from_numpy(route)[None])
             t["network"] = time.perf_counter() - t0
             t0 = time.perf_counter()
+            if self.time_gap.weight > 0:
+                now = quantised(uncertainty_map(scene, self.grid, self.sigma_x, self.sigma_y))
+                penalty = self.time_gap.penalty(now.astype(np.float32) / 255.0, evidence[:, 0], st.step_s)
+                reward = reward - torch.from_numpy(penalty)[None]
             _, policy = spacetime_value_iteration(reward, g, st.max_forward, st.max_across)
             t["vi"] = time.perf_counter() - t0
         t0 = time.perf_counter()

@@ -136,3 +136,21 @@ def test_coarser_steps_are_interpolated_to_the_plans_twelve():
     np.testing.assert_allclose(plan[3], [3.0, 0.0])
     np.testing.assert_allclose(plan[0], [0.75, 0.0])
     np.testing.assert_allclose(plan[-1], [9.0, 1.0])
+
+
+def test_the_time_gap_prices_where_an_agent_was_up_to_the_gap_before():
+    from riskmap.planner.st_planner import TimeGapConfig
+
+    now = np.zeros((1, 6))
+    now[0, 0] = 1.0
+    predicted = np.zeros((4, 1, 6))
+    for t in range(4):                    # an agent one cell further each 0.5 s step
+        predicted[t, 0, t + 1] = 1.0
+    penalty = TimeGapConfig(time_gap_s=1.0, weight=3.0).penalty(now, predicted, 0.5)
+    # at step t: its cells at steps t − 2 … t (step 0: now), each priced 3
+    np.testing.assert_array_equal(penalty[:, 0] > 0, [[1, 1, 0, 0, 0, 0], [1, 1, 1, 0, 0, 0],
+                                                      [0, 1, 1, 1, 0, 0], [0, 0, 1, 1, 1, 0]])
+    assert penalty.max() == 3.0
+    np.testing.assert_array_equal(TimeGapConfig(0.0, 3.0).penalty(now, predicted, 0.5), 3 * predicted)
+    with pytest.raises(InputError, match="time_gap"):
+        TimeGapConfig(time_gap_s=-1.0, weight=1.0)
