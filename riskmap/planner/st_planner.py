@@ -23,6 +23,7 @@ from rasterize.raster import rasterize_scene
 from rasterize.scene import Scene
 from rasterize.spacetime import quantised, step_evidence
 from riskmap.infra.checkpoint import route_settings_of
+from riskmap.planner.irl import goal_log_map
 from riskmap.planner.st_model import SpaceTimeConfig, load_spacetime_model
 from riskmap.planner.st_sampler import SpaceTimeSamplerConfig, spacetime_plan
 from riskmap.planner.st_vi import spacetime_value_iteration, spacetime_visitation
@@ -70,6 +71,10 @@ class SpaceTimePlanner:
         self.sampler, self.seed = sampler, seed
         self.route_settings: dict | None = None   # route rule of recorded training data, if any
         self.time_gap = TimeGapConfig()            # off; see TimeGapConfig
+        # Planning-time pull towards the route rule's goal added to the learned goal map:
+        # g + route_goal_weight · (−d² / 2σ²), d in cells from the route goal, σ² the goal
+        # variance (0: the learned goal alone). The sidecar's `planning.route_goal_weight`.
+        self.route_goal_weight = 0.0
         self._calls = 0
 
     @classmethod
@@ -88,6 +93,11 @@ class SpaceTimePlanner:
                       side["maps"]["sigma_y"], SpaceTimeSamplerConfig(**side.get("sampler", {})),
                       seed)
         planner.route_settings = route_settings_of(side)
+        weight = side.get("planning", {}).get("route_goal_weight", 0.0)
+        if not (isinstance(weight, (int, float)) and 0.0 <= weight < float("inf")):
+            raise InputError(f"the sidecar's planning.route_goal_weight {weight!r} must be a number "
+                             ">= 0; fix or remove it")
+        planner.route_goal_weight = float(weight)
         settings = side.get("planning", {}).get("time_gap")
         if settings is not None:
             if not isinstance(settings, dict) or set(settings) - {"time_gap_s", "weight"}:
@@ -132,6 +142,9 @@ class SpaceTimePlanner:
                                    torch.from_numpy(evidence)[None], torch.from_numpy(route)[None])
             t["network"] = time.perf_counter() - t0
             t0 = time.perf_counter()
+            if self.route_goal_weight > 0:
+                g = g + self.route_goal_weight * goal_log_map(
+                    torch.tensor([goal_cell]), self.grid.rows, self.grid.cols, self.goal_variance)
             if self.time_gap.weight > 0:
                 now = quantised(uncertainty_map(scene, self.grid, self.sigma_x, self.sigma_y))
                 penalty = self.time_gap.penalty(now.astype(np.float32) / 255.0, evidence[:, 0], st.step_s)

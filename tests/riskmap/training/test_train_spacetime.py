@@ -81,3 +81,20 @@ def test_the_reach_comes_from_the_data_when_not_given(tiny_dataset, tmp_path):
 def test_spatial_only_settings_are_refused(tiny_dataset, tmp_path, clash):
     with pytest.raises(InputError, match="--planner spacetime"):
         tiny_train_config(tiny_dataset, tmp_path / "x", planner="spacetime", **clash)
+
+
+def test_planning_settings_come_from_the_sidecar_and_bad_ones_are_named(st_checkpoint, tmp_path):
+    import shutil
+
+    side = json.loads(st_checkpoint.with_suffix(".json").read_text())
+    copy = tmp_path / "ck"
+    shutil.copy(st_checkpoint.with_suffix(".safetensors"), copy.with_suffix(".safetensors"))
+    side["planning"] = {"route_goal_weight": 0.5, "time_gap": {"time_gap_s": 1.0, "weight": 20.0}}
+    copy.with_suffix(".json").write_text(json.dumps(side))
+    planner = load_planner(copy)
+    assert planner.route_goal_weight == 0.5 and planner.time_gap.weight == 20.0
+    for bad in ({"route_goal_weight": -1}, {"time_gap": {"gap": 1}}):
+        side["planning"] = bad
+        copy.with_suffix(".json").write_text(json.dumps(side))
+        with pytest.raises(InputError, match="planning"):
+            load_planner(copy)
