@@ -43,6 +43,7 @@ demo: $(STAMP)
 	$(BIN)/riskmap figures scenes --data $(DEMO_OUT)/data/intersection --out $(DEMO_OUT)/figures/scenes_intersection --count 3
 	$(BIN)/riskmap figures plans --checkpoint checkpoints/riskmap_highway --data $(DEMO_OUT)/data/highway --out $(DEMO_OUT)/figures/plans_highway --count 4
 	$(BIN)/riskmap figures plans --checkpoint checkpoints/riskmap_intersection --data $(DEMO_OUT)/data/intersection --out $(DEMO_OUT)/figures/plans_intersection --count 4
+	$(BIN)/riskmap figures plans --checkpoint checkpoints/riskmap_st_intersection --data $(DEMO_OUT)/data/intersection --out $(DEMO_OUT)/figures/plans_intersection_spacetime --count 2
 	$(BIN)/riskmap drive --checkpoint checkpoints/riskmap_highway --env highway-v0 --episodes 2 --seed 0 --out $(DEMO_OUT)/drive/highway --resume
 	$(BIN)/riskmap drive --planner idm --env highway-v0 --episodes 2 --seed 0 --out $(DEMO_OUT)/drive/highway_idm --resume
 	$(BIN)/riskmap drive --checkpoint checkpoints/riskmap_intersection --env intersection-v0 --episodes 2 --seed 0 --out $(DEMO_OUT)/drive/intersection --frames --resume

@@ -1,8 +1,8 @@
 """The space-time planner at a yield: r_t and D_t on held-out windows where the human waits.
 
-A window counts as a yield when the human is moving now (> 2 m/s), covers less than 40% of what
+A window counts as a yield when the human is moving now (> 1 m/s), covers less than half of what
 its present speed would cover over the next 3 s, and another agent is predicted (from the
-present) within 8 m of the human's recorded path in that time. For the first `--count` such
+present) within 10 m of the human's recorded path in that time. For the first `--count` such
 windows (in dataset order) it writes the plan panels and the per-step strip, and prints how far
 the plan and the human go in 3 s.
 
@@ -28,12 +28,12 @@ HORIZON_S = 3.0
 
 def is_yield(scene) -> bool:
     speed = float(scene.ego_state()[4])
-    if speed < 2.0:
+    if speed < 1.0:
         return False
     steps = round(HORIZON_S / scene.dt)
     future = scene.ego_future_xy()[:steps]
     travelled = float(np.linalg.norm(future[-1] - scene.ego_state()[:2]))
-    if travelled > 0.4 * speed * HORIZON_S:
+    if travelled > 0.5 * speed * HORIZON_S:
         return False
     xy, _ = predict_along_lanes(scene.past(), HORIZON_S, 0.5)
     others = scene.valid[:, scene.current_index].copy()
@@ -41,7 +41,7 @@ def is_yield(scene) -> bool:
     if not others.any():
         return False
     gaps = np.linalg.norm(xy[others][:, :, None] - future[None, None], axis=-1)
-    return bool(np.nanmin(gaps) < 8.0)
+    return bool(np.nanmin(gaps) < 10.0)
 
 
 def main() -> None:
