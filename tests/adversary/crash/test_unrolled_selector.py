@@ -91,6 +91,11 @@ def test_gradient_reaches_every_selector_parameter_through_the_unroll(tiny):
     loss.sum().backward()
     for name, param in selector.named_parameters():
         assert param.grad is not None and torch.isfinite(param.grad).all(), name
+        if name == "adv_head.2.bias":
+            # One bias added to every agent's logit before the softmax leaves p unchanged: its
+            # gradient is zero exactly, and only rounding made it nonzero on some CPUs.
+            assert param.grad.abs().sum() < 1e-6, name
+            continue
         assert param.grad.abs().sum() > 0, name
     through = [param.grad.clone() for param in selector.parameters()]
 
