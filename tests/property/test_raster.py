@@ -237,6 +237,9 @@ def far_agents(draw, scene, config):
             # Predictions move a box at most speed x predict_s along its path, after snapping it
             # up to MAX_OFFSET_M onto a lane; then half its diagonal must clear the edge.
             reach = np.hypot(*sizes[i]) / 2 + speed * config.predict_s + MAX_OFFSET_M
+            # ... by more than the fill's fixed-point rounding (1/16 px, twice): on a 2 x 2 raster
+            # of 120 m pixels a box 3.7 m beyond the front edge rounds onto it and lights row 0.
+            reach += 2.0 * max(config.row_m, config.col_m) / 16.0
             beyond = reach + draw(st.one_of(st.floats(1e-3, 50.0), st.floats(50.0, 1e12)))
             along = draw(st.floats(-1.0, 1.0)) * draw(st.sampled_from([10.0, 1e3, 1e9]))
             x, y = {"front": (ext.front_m + beyond, along), "back": (-ext.back_m - beyond, along),
