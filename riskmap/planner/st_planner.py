@@ -109,20 +109,6 @@ class SpaceTimePlanner:
     def reset(self, scene: Scene) -> None:
         self._calls = 0
 
-    def rewards(self, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
-        """(r [T, G, G], evidence [T, E, G, G]) of a scene, from its present only."""
-        scene = scene.past()
-        st = self.spacetime
-        evidence = quantised(step_evidence(scene, self.grid, st.steps, st.step_s, self.sigma_x,
-                                           self.sigma_y)).astype(np.float32) / 255.0
-        route = goal_map(route_goal_cell(scene, self.grid), self.grid, self.goal_variance)
-        with torch.inference_mode():
-            image = torch.from_numpy(rasterize_scene(scene, self.raster)).float().div_(255.0)[None]
-            image = image.contiguous(memory_format=torch.channels_last)
-            reward, _ = self.model(image, torch.from_numpy(motion_features(scene, self.grid))[None],
-                                   torch.from_numpy(evidence)[None], torch.from_numpy(route)[None])
-        return reward[0].numpy(), evidence
-
     def plan(self, scene: Scene) -> Plan:
         scene = scene.past()
         st, t = self.spacetime, {}

@@ -11,6 +11,7 @@ import numpy as np
 import torch
 
 from rasterize.errors import InputError
+from rasterize.maps import start_cell
 from rasterize.spacetime import demo_cells_per_step
 from riskmap.planner.model import ModelConfig, with_raster_channels
 from riskmap.planner.st_irl import SpaceTimeIRLConfig, demo_step_nll, st_irl_step
@@ -40,7 +41,7 @@ def reach_from_data(dataset, indices: list[int], steps: int, step_s: float
     forward, across = [], []
     for i in picks:
         scene = dataset.scene(int(i))
-        cells = np.concatenate([[dataset_start(dataset)],
+        cells = np.concatenate([[start_cell(dataset.grid)],
                                 demo_cells_per_step(scene, dataset.grid, steps, step_s)])
         both = (cells[1:, 0] >= 0) & (cells[:-1, 0] >= 0)
         delta = (cells[1:] - cells[:-1])[both]
@@ -53,12 +54,6 @@ def reach_from_data(dataset, indices: list[int], steps: int, step_s: float
     lat = int(np.clip(math.ceil(np.quantile(across, REACH_QUANTILE)), 1, MAX_ACROSS_CELLS))
     return k, lat, {"windows": len(picks), "quantile": REACH_QUANTILE,
                     "forward_max": int(np.max(forward)), "across_max": int(np.max(across))}
-
-
-def dataset_start(dataset) -> tuple[int, int]:
-    from rasterize.maps import start_cell
-
-    return start_cell(dataset.grid)
 
 
 def spacetime_config(config, dataset, train_idx: list[int]) -> tuple[SpaceTimeConfig, dict]:

@@ -402,27 +402,22 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True, on_e
             batch = _to(batch, device, channels_last)
             if spacetime:
                 loss, nll = st_train.train_step(model, batch, irl)
-                optimizer.zero_grad()
-                loss.backward()
-                torch.nn.utils.clip_grad_norm_(model.parameters(), config.grad_clip)
-                optimizer.step()
-                losses.append(loss.item())
-                nlls.append(nll)
-                bar.set_postfix(nll=f"{np.mean(nlls):.2f}")
-                continue
-            risk, arcs = _forward(model, batch, config.timing_head)
-            step = irl_step(risk, batch, irl)
-            loss = step.loss
-            if arcs is not None:
-                timed = timing_loss(arcs, batch["future"])
-                timings.append(timed.item())
-                loss = timed if config.freeze_risk else loss + timed
+                irl_loss = loss
+            else:
+                risk, arcs = _forward(model, batch, config.timing_head)
+                step = irl_step(risk, batch, irl)
+                loss = irl_loss = step.loss
+                if arcs is not None:
+                    timed = timing_loss(arcs, batch["future"])
+                    timings.append(timed.item())
+                    loss = timed if config.freeze_risk else loss + timed
+                nll = demo_negative_log_likelihood(step.policy, batch["demo_path"]).mean().item()
             optimizer.zero_grad()
             loss.backward()
             torch.nn.utils.clip_grad_norm_(model.parameters(), config.grad_clip)
             optimizer.step()
-            losses.append(step.loss.item())
-            nlls.append(demo_negative_log_likelihood(step.policy, batch["demo_path"]).mean().item())
+            losses.append(irl_loss.item())
+            nlls.append(nll)
             bar.set_postfix(nll=f"{np.mean(nlls):.2f}")
         trained = time.perf_counter()
         metrics = {"train_loss": float(np.mean(losses)), "train_nll": float(np.mean(nlls)),
