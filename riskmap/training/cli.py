@@ -58,8 +58,10 @@ HELP = {
                    "the ego is at each waypoint time, by which the planner then times its plan",
     "freeze_risk": "train only the timing head; the risk map stays --init-checkpoint's",
     "planner": "spatial: the paper's planner (one risk map); spacetime: a reward map per future "
-               "step and value iteration over (step, cell), so it can wait and yield (DESIGN 3b)",
-    "steps": "spacetime: reward maps over the 6 s plan (12: one per 0.5 s; 6, 4 or 3: coarser)",
+               "step and value iteration over (step, cell), so it can wait and yield (DESIGN 3b); "
+               "default: spatial",
+    "steps": "spacetime: reward maps over the 6 s plan (12, the default: one per 0.5 s; 6, 4 or "
+             "3: coarser)",
     "max_forward": "spacetime: cells the ego may move forward per step (K); default: from the "
                    "demonstrations' fastest steps",
     "max_across": "spacetime: cells the ego may move sideways per step (L); default: from the "
