@@ -157,7 +157,7 @@ def _not_attacked(reason: str, extra: dict, timing: dict | None = None) -> dict:
         "has_adversary": False, "collided_with_adversary": False, "collision_type": None,
         "collision_time_s": None, "kinematic_mps": None, "adversary_off_road": None,
         "other_off_road": False, "encounters": None, "dangerous_encounters": None,
-        "safety_pct": None, "solution_found": None,
+        "safety_pct": None, "solution_found": None, "failure": None,
         "attack_extra": extra, "timing": timing or {}})
 
 
@@ -189,7 +189,8 @@ def crash_record(result: dict, scene_s: float, guard: dict | None = None) -> dic
         "adversary_off_road": bool(m["adversary_off_road"]),
         "other_off_road": bool(m["other_off_road"]),
         "encounters": None, "dangerous_encounters": None, "safety_pct": None,
-        "solution_found": m["solution_found"], **(guard or {}), "attack_extra": extra,
+        "solution_found": m["solution_found"], "failure": m.get("failure"), **(guard or {}),
+        "attack_extra": extra,
         "timing": {**timing, "generation_seconds": result["generation"]["batch_seconds"]}})
 
 

@@ -227,20 +227,21 @@ def _encounters(result, contact_step: int | None, safety, every: int) -> tuple[i
 
 
 def natural_record(result, scene: RecordedScene, safety, driver: str | None = None,
-                   guard: dict | None = None) -> dict:
+                   guard: dict | None = None, lanes=()) -> dict:
     """The job record fields of a natural drive on a recorded scene (module docstring); `driver`:
     the name of what drove the ego (default: the drive's own); `guard`: the guard's counts
-    (adversary.attacks.episode.guard_counts; default: no guard)."""
+    (adversary.attacks.episode.guard_counts; default: no guard); `lanes`: the scene's lanes, on
+    which the failure classification may change lanes (none: it only brakes or speeds up)."""
     from adversary.attacks.episode import GUARD_FIELDS, job_fields
     from adversary.crash.recorded import recording_traffic
-    from adversary.crash.solution import ego_only_solution
+    from riskmap.sim.alternatives import ego_only_solution
     from riskmap.sim.metrics import coarse_collision_type, safety_pct
     from riskmap.sim.record import EpisodeRecord
 
     drive = EpisodeRecord.from_dict(result.drive)
     contact = drive.extra.get("contact")
     collision = {"collision_type": None, "collision_time_s": None, "kinematic_mps": None}
-    solution, step = None, None
+    solution = step = failure = None
     if contact is not None:
         step = round(contact["time_s"] / result.dt_s)
         partner = recording_traffic(scene.recording).index_of(contact["other_id"])
@@ -250,6 +251,7 @@ def natural_record(result, scene: RecordedScene, safety, driver: str | None = No
                      "collision_time_s": float(contact["time_s"]),
                      "kinematic_mps": float(np.linalg.norm(ego_v.velocity - other_v.velocity))}
         solution = ego_only_solution(result.states, result.valid, result.sizes, result.ego, step, result.dt_s)
+        failure = classify_recorded_collision(result, partner, step, lanes)
     dangerous, encounters = _encounters(result, step, safety, max(1, round(0.5 / result.dt_s)))
     return job_fields(replace(drive, planner="", extra={
         "has_adversary": False, "collided_with_adversary": False, **collision,
@@ -257,10 +259,29 @@ def natural_record(result, scene: RecordedScene, safety, driver: str | None = No
         "encounters": encounters, "dangerous_encounters": dangerous,
         "safety_pct": safety_pct(dangerous, encounters),
         "solution_found": None if solution is None else bool(solution),
+        "failure": failure,
         "env_seed": None,
         **(guard or dict.fromkeys(GUARD_FIELDS)),
         "attack_extra": {"contact": contact, "driver": driver or drive.extra.get("driver")},
     }))
+
+
+def classify_recorded_collision(result, partner: int, step: int, lanes=()) -> dict:
+    """`riskmap.sim.failures.classify_failure` of a natural drive's contact on a recording (no
+    attack to validate); with `lanes`, lane changes that keep the box on them count too."""
+    from riskmap.sim.failures import classify_failure
+    from riskmap.sim.metrics import box_off_road, drivable_area
+
+    on_road, lane_m = None, None
+    if lanes:
+        area = drivable_area(lanes)
+        lane_m = float(np.median([lane.width_m for lane in lanes]))
+
+        def on_road(centre, heading, length, width):
+            return not box_off_road(np.array([*centre, *heading]), (length, width), area)
+
+    return classify_failure(result.states, result.valid, result.sizes, result.ego, partner, step, result.dt_s,
+                            on_road=on_road, lane_width_m=lane_m, from_step=result.t0_step)
 
 
 def natural_recorded_job(job) -> tuple[dict, bytes]:
@@ -280,4 +301,5 @@ def natural_recorded_job(job) -> tuple[dict, bytes]:
     artifact = npz_bytes(scene_arrays(result.final_scene, None, recording))
     # The drive names the planner it was handed; with the recording wrapper, name the planner.
     driver = None if recording is None else type(planner).__name__
-    return natural_record(result, job.scene, job.safety, driver, guard_counts(recording or planner)), artifact
+    return natural_record(result, job.scene, job.safety, driver, guard_counts(recording or planner),
+                          record.window.lanes), artifact

@@ -21,11 +21,12 @@ import numpy as np
 from scipy.interpolate import CubicHermiteSpline
 
 from adversary.crash.scenes import CONTROL_HZ, WINDOW_DT_S, SceneRecord
-from adversary.crash.solution import ego_only_solution
+from riskmap.sim.alternatives import ego_only_solution
 from rasterize.errors import InputError
 from rasterize.frames import box_corners
 from riskmap.registry import cached_planner
 from riskmap.sim.episode import cached_env
+from riskmap.sim.failures import classify_failure
 from riskmap.sim.log_replay import HumanLog
 from riskmap.sim.metrics import (
     COLLISION_TYPES,
@@ -351,10 +352,14 @@ def judge(record: SceneRecord, tracks: np.ndarray, rows, adversary_row: int, pla
     ego_min_accel_mps2 / ego_max_abs_accel_mps2: see `_ego_accelerations`, over the 2 s before
       the collision (before the end of the rollout without one).
     collision_type: `classify_collision` over the 3 s before the collision (None without one).
-    solution_found: STRIVE's solution check (`adversary.crash.solution.ego_only_solution` on the
+    solution_found: STRIVE's solution check (`riskmap.sim.alternatives.ego_only_solution` on the
       rollout: could the ego alone, from 3 s before, have avoided every box): along its own path
       with constant accelerations (solution_found_longitudinal), or moving one lane width left or
       right within 2 s while staying on the road; None without a collision.
+    failure: the collision with the adversary classified (`riskmap.sim.failures.classify_failure`:
+      fault, avoidable by a driver who reacts once the threat is visible, a valid attack); without
+      one, the ego's first collision with any other vehicle from t0 (no attack to validate);
+      None without a collision.
     off_road: the ego, by the episode's own check (the ego off every lane, once a second) at any time of
       the rollout, after a collision too.
     distance_m: distance the ego drove from t0 to the collision (to the end without one);
@@ -405,7 +410,7 @@ def judge(record: SceneRecord, tracks: np.ndarray, rows, adversary_row: int, pla
         "adversary_off_road": adv_frac > OFF_ROAD_FRACTION, "adversary_off_road_max": adv_frac,
         "other_off_road": other_frac > OFF_ROAD_FRACTION, "other_off_road_max": other_frac,
         "kinematic_value_mps": None, "collision_type": None, "solution_found": None,
-        "solution_found_longitudinal": None,
+        "solution_found_longitudinal": None, "failure": None,
         "off_road": bool(result.drive["off_road"]),
     }
     metrics["ego_min_accel_mps2"], metrics["ego_max_abs_accel_mps2"] = _ego_accelerations(result, end)
@@ -429,6 +434,13 @@ def judge(record: SceneRecord, tracks: np.ndarray, rows, adversary_row: int, pla
         metrics["solution_found"] = bool(longitudinal) or bool(ego_only_solution(
             s, result.valid, result.sizes, ego, k_coll, dt, accels_mps2=SOLUTION_LATERAL_ACCELS_MPS2,
             lateral_offsets_m=(lane_m, -lane_m), on_road=on_road))
+        metrics["failure"] = classify_failure(s, result.valid, result.sizes, ego, adv, k_coll, dt, attack=True,
+                                              on_road=on_road, lane_width_m=lane_m,
+                                              adversary_off_road=adv_frac > OFF_ROAD_FRACTION, from_step=k0)
+    elif k_any is not None and with_any is not None:       # the ego hit someone else: a failure too
+        lane_m = float(np.median([lane.width_m for lane in record.window.lanes])) if record.window.lanes else 4.0
+        metrics["failure"] = classify_failure(result.states, result.valid, result.sizes, ego, int(with_any), k_any,
+                                              dt, lane_width_m=lane_m, from_step=k0)
     path = result.states[ego, k0:end + 1, :2][result.valid[ego, k0:end + 1]]
     metrics["distance_m"] = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
     gap = _min_gap(result, k0, end)

@@ -212,6 +212,8 @@ def _interval(successes: int, trials: int) -> list[float] | None:
 
 
 def summarise(records: list[dict]) -> dict:
+    from riskmap.sim.failures import summarise_failures
+
     ok = [r for r in records if r["status"] == "ok"]
     hits = [r for r in ok if r["collision"]]
     n = len(records)
@@ -240,6 +242,8 @@ def summarise(records: list[dict]) -> dict:
         "kinematic_value_mps": float(np.mean(kin)) if kin else None,
         "solution_rate": float(np.mean(solved)) if solved else None,
         "collision_types": types,
+        # valid, avoidable, at-fault: the failures that count (riskmap.sim.failures)
+        "failures": summarise_failures([r["metrics"].get("failure") for r in hits], n),
         "seconds_per_scene_median": float(np.median(seconds)) if seconds else None,
         "seconds_per_scene_mean": float(np.mean(seconds)) if seconds else None,
         "iterations_mean": float(np.mean([r["generation"]["iterations"] for r in ok])) if ok else None,
@@ -249,6 +253,10 @@ def summarise(records: list[dict]) -> dict:
 
 
 def table_row(label: str, s: dict) -> str:
+    """One row of TABLE_HEADER: the failures that count first, the raw collision rate beside them;
+    valid / avoidable / fault columns count collisions (– when no record could be classified)."""
+    from riskmap.sim.failures import summarise_failures
+
     def pct(v):
         return "–" if v is None else f"{100 * v:.1f}"
 
@@ -258,16 +266,24 @@ def table_row(label: str, s: dict) -> str:
     def interval(ci):
         return "" if not ci else f" [{100 * ci[0]:.0f}–{100 * ci[1]:.0f}]"
 
-    return (f"| {label} | {s['collisions']}/{s['scenes']} ({pct(s['collision_rate'])}"
-            f"{interval(s.get('collision_ci95'))}) | "
+    f = s.get("failures") or summarise_failures([None] * s["collisions"], s["scenes"])
+
+    def share(k):
+        return "–" if k is None or f["collisions"] == f["unknown"] else f"{k}"
+
+    return (f"| {label} | {f['counted']}/{s['scenes']} ({pct(f['counted_rate'])}"
+            f"{interval(f.get('counted_ci95'))}) | {s['collisions']}/{s['scenes']} ({pct(s['collision_rate'])}"
+            f"{interval(s.get('collision_ci95'))}) | {share(f['valid'])} | {share(f['avoidable'])} | "
+            f"{share(f['at_fault'])} / {share(f['struck_from_behind'])} / {share(f['side'])} | "
             f"{pct(s['adversary_off_road_rate'])}{interval(s.get('adversary_off_road_ci95'))} | "
             f"{pct(s['other_off_road_rate'])} | "
             f"{num(s['kinematic_value_mps'])} | {pct(s['solution_rate'])} | "
             f"{num(s['seconds_per_scene_median'], '{:.1f}')} |")
 
 
-TABLE_HEADER = ("| run | collision (%, 95% CI) | adv off-road % | other off-road % | kinematic value m/s | "
-                "solution % | s/scene |\n|---|---|---|---|---|---|---|")
+TABLE_HEADER = ("| run | valid avoidable at-fault (%, 95% CI) | collision (%, 95% CI) | valid | avoidable | "
+                "at fault / struck from behind / side | adv off-road % | other off-road % | kinematic value m/s | "
+                "solution % | s/scene |\n|---|---|---|---|---|---|---|---|---|---|---|")
 
 
 def run_attacks(planner_spec: str, scenes_dir: Path, count: int, config: AttackConfig, seed: int,

@@ -6,7 +6,7 @@ From it:
 
     1. the ego's first collision with the adversary, k_c (the judge's criterion, IoU > 0.02);
     2. a collision-free alternative from k_s = k_c - `lookback_s`: of the judge's solution family
-       (`adversary.crash.solution`: constant accelerations along the ego's own path, else one
+       (`riskmap.sim.alternatives`: constant accelerations along the ego's own path, else one
        lane width left or right), clear of every box up to the end of the drive (not only to
        k_c) and on the road, the one that keeps the most room to every other vehicle (`choice`);
     3. failing that, the human's own recorded drive where it collides with nobody (on recorded
@@ -40,7 +40,7 @@ from adversary.crash.judge import (
     splice_tracks,
 )
 from adversary.crash.scenes import WINDOW_DT_S, SceneRecord
-from adversary.crash.solution import alternative_track, first_clear_alternative, safest_clear_alternative
+from riskmap.sim.alternatives import alternative_track, first_clear_alternative, safest_clear_alternative
 from rasterize.errors import InputError
 from riskmap.sim.metrics import box_off_road
 

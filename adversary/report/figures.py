@@ -38,7 +38,7 @@ def metrics_figure(rows: list[dict], path: Path) -> str:
     plt = _plt()
     attacks = sorted({r["attack"] for r in rows})
     planners = sorted({r["planner"] for r in rows})
-    panels = [("collision_rate", "collision rate (%)", 100.0), ("safety_pct", "Safety % (mean)", 1.0),
+    panels = [("collision_rate", "collision rate (%)", 100.0), ("safety_pct", "Safety % (danger, mean; lower is better)", 1.0),
               ("distance_m", "distance (m, mean)", 1.0), ("kinematic_mps", "kinematic value (m/s)", 1.0)]
     fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), 3.8), dpi=100)
     width = 0.8 / max(1, len(planners))
@@ -65,16 +65,19 @@ def metrics_figure(rows: list[dict], path: Path) -> str:
 
 
 def headline_figure(rows: list[dict], attack_order: list[str], path: Path) -> str:
-    """The report's first figure: collision rate per planner and attack, one panel per scenario
-    family (numbers.py's by-family rows), bars with their 95% Wilson intervals and k/n above."""
+    """The report's first figure: the rate of failures that count (valid, avoidable, at fault)
+    per planner and attack, one panel per scenario family (numbers.py's by-family rows), solid
+    bars with their 95% Wilson intervals and k/n above; every collision's rate as an outline
+    around each bar."""
     from matplotlib.patches import Patch
 
     plt = _plt()
-    rows = [r for r in rows if r["collision_rate"] is not None]
+    rows = [r for r in rows if r["collision_rate"] is not None and r.get("failure_rate") is not None]
     families = sorted({r["family"] for r in rows})
     planners = sorted({r["planner"] for r in rows})
     colour = {p: plt.get_cmap("tab10")(j % 10) for j, p in enumerate(planners)}
-    by_key = {(r["family"], r["planner"], r["attack"]): r["collision_rate"] for r in rows}
+    by_key = {(r["family"], r["planner"], r["attack"]): r["failure_rate"] for r in rows}
+    every = {(r["family"], r["planner"], r["attack"]): r["collision_rate"] for r in rows}
     order = [a for a in attack_order if any(r["attack"] == a for r in rows)]
     order += sorted({r["attack"] for r in rows} - set(order))
     attacks_of = {f: [a for a in order if any((f, p, a) in by_key for p in planners)] for f in families}
@@ -96,9 +99,13 @@ def headline_figure(rows: list[dict], attack_order: list[str], path: Path) -> st
                     continue
                 x = i + (j - (len(here) - 1) / 2) * width
                 v, lo, hi = 100 * stat["value"], 100 * stat["lo"], 100 * stat["hi"]
+                raw = every[family, planner, attack]
+                ax.bar(x, 100 * raw["value"], width * 0.9, fill=False, edgecolor=colour[planner], linewidth=1.2,
+                       linestyle="--")
                 ax.bar(x, v, width * 0.9, color=colour[planner], edgecolor=colour[planner], linewidth=1.5)
                 ax.errorbar(x, v, yerr=[[v - lo], [hi - v]], fmt="none", ecolor="#333", capsize=3, lw=1)
-                ax.text(x, hi + 1.5, f"{stat['k']}/{stat['n']}", ha="center", va="bottom", fontsize=7)
+                ax.text(x, max(hi, 100 * raw["value"]) + 1.5, f"{stat['k']}/{stat['n']}", ha="center",
+                        va="bottom", fontsize=7)
         labels = attacks_of[family]
         ax.set_xticks(range(len(labels)), labels, fontsize=8, rotation=15 if turn else 0,
                       ha="right" if turn else "center")
@@ -108,13 +115,14 @@ def headline_figure(rows: list[dict], attack_order: list[str], path: Path) -> st
         jobs = sum(by_key[family, p, a]["n"] for p in here for a in labels if (family, p, a) in by_key)
         ax.set_title(f"{family} ({jobs} jobs)", fontsize=10)
         ax.grid(axis="y", alpha=0.3)
-    axes[0][0].set_ylabel("collision rate (%)")
+    axes[0][0].set_ylabel("failures that count (%)")
     names = [short_spec(p) for p in planners]
-    legend_in = 0.7 + 0.058 * max(len(name) for name in names)     # about 0.058 in a character
-    fig.legend([Patch(color=colour[p]) for p in planners], names, loc="center right", fontsize=8,
-               frameon=False, title="planner", title_fontsize=8)
-    fig.suptitle("collision rate per planner and attack (bars: 95% Wilson intervals; k/n jobs above)",
-                 fontsize=10.5)
+    legend_in = 0.7 + 0.058 * max(len(name) for name in names + ["every collision"])     # about 0.058 in a character
+    fig.legend([Patch(color=colour[p]) for p in planners] + [Patch(fill=False, edgecolor="#555", linestyle="--")],
+               names + ["every collision"], loc="center right", fontsize=8, frameon=False, title="planner",
+               title_fontsize=8)
+    fig.suptitle("valid, avoidable, at-fault failures per planner and attack\n"
+                 "(solid, 95% Wilson intervals, k/n jobs above; dashed outline: every collision)", fontsize=10)
     return _save(fig, path, rect=(0, 0, 1 - legend_in / width_in, 0.97))
 
 

@@ -4,6 +4,12 @@ Records are grouped by (planner, attack) over all scenes, and by (family, planne
 family is highway-env's (highway, intersection, ...) or a recorded one's (us101, ...).
 Rates carry Wilson intervals, means percentile-bootstrap intervals (riskmap.infra.stats):
 
+    failures that count      valid, avoidable, at-fault collisions / finished jobs (the report's
+                             headline; riskmap.sim.failures): the ego's front hit the other, a
+                             driver reacting 0.5 s after the threat became visible could have
+                             avoided it, and (attacks) the adversary did it alone within
+                             physical limits. failure_classes counts each class over the
+                             collisions; a record without the classification is "unknown"
     collision rate           ego collisions / finished jobs
     adversary collision      collisions with the attack's adversary / jobs whose attack had one
     adversary off-road       adversary off the road before any collision / jobs with an adversary
@@ -33,6 +39,7 @@ import numpy as np
 from adversary.attacks.episode import GUARD_FIELDS
 from adversary.attacks.recorded import job_family
 from riskmap.infra.stats import bootstrap_mean, wilson
+from riskmap.sim.failures import summarise_failures
 from riskmap.sim.metrics import CAMPAIGN_COLLISION_TYPES
 from riskmap.sim.record import current_names
 
@@ -44,8 +51,11 @@ def _group_metrics(records: list[dict]) -> dict:
     adv = [r for r in ok if r.get("has_adversary")]
     collided = [r for r in ok if r["collided"]]
     solved = [r for r in collided if r.get("solution_found") is not None]
+    classes = summarise_failures([r.get("failure") for r in collided], len(ok))
     return {
         "jobs": len(records), "failed": len(records) - len(ok),
+        "failure_rate": wilson(classes["counted"], len(ok)),
+        "failure_classes": classes,
         "collision_rate": wilson(len(collided), len(ok)),
         "adversary_collision_rate": wilson(sum(r["collided_with_adversary"] for r in adv), len(adv)),
         "adversary_off_road": wilson(sum(bool(r["adversary_off_road"]) for r in adv), len(adv)),

@@ -1,9 +1,10 @@
 """`adversary report DIR`: report.html (Jinja2) + PNG figures + report.json from a campaign,
 and a page per job (jobs/JOB_ID.html, its pictures under jobs/media/).
 
-The page opens with a summary paragraph written from the numbers (adversary.report.summary) and
-the collision rate per planner and attack with its intervals (figures.headline_figure); the
-tables follow. The worst scenes that collided are animated (GIF, adversary.report.frames).
+The page opens with the failures that count (valid, avoidable, at-fault collisions,
+riskmap.sim.failures): a paragraph written from the numbers (adversary.report.summary) and their
+rate per planner and attack with its intervals, every collision's rate beside it
+(figures.headline_figure); the tables follow. The worst scenes that collided are animated (GIF, adversary.report.frames).
 
 report.json holds every number on the page: "results" (a function of the records alone, so a
 resumed or distributed campaign gives the same), "timing" (machine-dependent), the config,
@@ -54,6 +55,29 @@ def _fmt_mean(stat, digits: int = 1) -> str:
     return f"{stat['value']:.{digits}f} [{stat['lo']:.{digits}f}, {stat['hi']:.{digits}f}] (n={stat['n']})"
 
 
+def _fmt_classes(classes) -> str:
+    """valid / avoidable / at fault / struck from behind / side / unknown counts of the collisions
+    (valid: "–" when no collision was an attack's)."""
+    if not classes or not classes["collisions"]:
+        return "–"
+    valid = "–" if classes["valid"] is None else classes["valid"]
+    return (f"{valid} / {classes['avoidable']} / {classes['at_fault']} / {classes['struck_from_behind']} / "
+            f"{classes['side']} / {classes['unknown']} of {classes['collisions']}")
+
+
+def failures_lead(rows: list[dict]) -> str:
+    """The report's first sentence: how many of all collisions count (numbers.py's rows)."""
+    classes = [r["failure_classes"] for r in rows if r.get("failure_classes")]
+    total = {k: sum(c[k] or 0 for c in classes) for k in ("collisions", "unknown", "counted", "trials")}
+    if not total["collisions"]:
+        return f"No collision in {total['trials']} finished jobs."
+    unknown = (f"; {total['unknown']} could not be classified (records written before the classification)"
+               if total["unknown"] else "")
+    return (f"Of {total['collisions']} collisions in {total['trials']} finished jobs, {total['counted']} count as "
+            f"failures of the planner: at fault, avoidable by a driver reacting to what it could see, and, "
+            f"where an adversary caused it, a valid attack{unknown}.")
+
+
 def _environment():
     from jinja2 import Environment, PackageLoader, select_autoescape
 
@@ -62,6 +86,7 @@ def _environment():
                       lstrip_blocks=True)
     env.filters["rate"] = _fmt_rate
     env.filters["mean"] = _fmt_mean
+    env.filters["classes"] = _fmt_classes
     return env
 
 
@@ -99,7 +124,9 @@ def make_report(campaign_dir: Path, out_dir: Path | None = None) -> dict:
     attacks = {a["label"] or a["name"]: a["name"] for a in meta["config"]["attacks"]}
     categories = {label: attack_entry(name).category for label, name in attacks.items()}
     categories.update({r["attack"]: r["attack_category"] for r in records if "attack_category" in r})
-    results["summary"] = summary_paragraph(results["by_family"], categories, results["failed"])
+    results["summary"] = {**summary_paragraph(results["by_family"], categories, results["failed"], "failure_rate"),
+                          "lead": failures_lead(results["comparison"])}
+    results["summary_collisions"] = summary_paragraph(results["by_family"], categories, results["failed"])
 
     images = {"headline": "figures/" + headline_figure(results["by_family"], list(attacks),
                                                         figures / "headline.png"),

@@ -72,7 +72,7 @@ __all__ = [
     "SafetyConfig", "StriveConfig", "ade_m", "box_gap", "box_iou", "box_off_road", "box_polygon",
     "centre_off_lane", "classify_collision", "closing_dangerous_encounters", "coarse_collision_name",
     "coarse_collision_type", "dangerous_encounters", "drivable_area", "goal_error_m", "mean_jerk_mps3",
-    "min_box_gap", "off_road_fraction", "path_length_m", "safety_pct", "stop_line_crossings",
+    "min_box_gap", "off_road_fraction", "on_network", "overlap_within", "path_length_m", "safety_pct", "stop_line_crossings",
     "summarise_metric", "vehicle_box",
 ]
 
@@ -230,13 +230,13 @@ def dangerous_encounters(ego: np.ndarray, ego_size: np.ndarray, others: np.ndarr
             q, g, w = others[a, t, :2], others[a, t, 2:4], others[a, t, 4]
             total += 1
             them = box_corners(q, g, others_sizes[a, 0], others_sizes[a, 1])
-            if box_gap(me, them) < config.close_gap_m or _overlap_within(
+            if box_gap(me, them) < config.close_gap_m or overlap_within(
                     me, v * h, them, w * g, config.ttc_s, config.ttc_step_s):
                 dangerous += 1
     return dangerous, total
 
 
-def _overlap_within(a: np.ndarray, velocity_a: np.ndarray, b: np.ndarray, velocity_b: np.ndarray,
+def overlap_within(a: np.ndarray, velocity_a: np.ndarray, b: np.ndarray, velocity_b: np.ndarray,
                     horizon_s: float, step_s: float) -> bool:
     """Whether boxes a and b (corners [4, 2]) overlap at some time in (0, horizon] at constant velocity."""
     relative = np.asarray(velocity_b, float) - np.asarray(velocity_a, float)
@@ -308,6 +308,20 @@ def centre_off_lane(road, vehicle, margin_m: float = 1.0) -> bool:
     lane = road.network.get_lane(road.network.get_closest_lane_index(vehicle.position,
                                                                      vehicle.heading))
     return not lane.on_lane(vehicle.position, margin=margin_m)
+
+
+def on_network(road, margin_m: float = 0.0):
+    """`on_road(centre [2], heading [2], length, width) -> bool` in the world frame for a
+    highway-env road: the box's centre on some lane of the network (`centre_off_lane`'s test,
+    highway-env's frame has y flipped). What the failure classification's lane changes ask."""
+    from types import SimpleNamespace
+
+    def on_road(centre, heading, length, width) -> bool:
+        vehicle = SimpleNamespace(position=np.array([float(centre[0]), -float(centre[1])]),
+                                  heading=float(np.arctan2(-heading[1], heading[0])))
+        return not centre_off_lane(road, vehicle, margin_m)
+
+    return on_road
 
 
 # ---- collision type -------------------------------------------------------------------------

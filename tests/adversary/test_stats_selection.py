@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from adversary.attacks.monitor import collision_type
-from adversary.crash.solution import ego_only_solution
+from riskmap.sim.alternatives import ego_only_solution
 from riskmap.infra.stats import bootstrap_mean, sign_test, wilson
 from riskmap.sim.aggressive import softmin_agent_weights
 

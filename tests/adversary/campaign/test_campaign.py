@@ -34,6 +34,11 @@ def test_every_job_has_one_record_with_the_fields_of_the_brief(tiny_campaign):
         assert r["has_adversary"] == (r["attack"] != "natural")
         assert (r["kinematic_mps"] is not None) == r["collided"]
         assert (r["solution_found"] is not None) == r["collided"]
+        # every collision classified (riskmap.sim.failures), the adversary's as an attack
+        assert (r["failure"] is not None) == r["collided"]
+        if r["collided"]:
+            assert r["failure"]["fault"] in ("at fault", "struck from behind", "side")
+            assert ("valid_attack" in r["failure"]) == r["collided_with_adversary"]
         assert (tiny_campaign / "artifacts" / f"{r['job_id']}.npz").is_file()
     natural_cv = [r for r in records if r["planner"] == "cv" and r["attack"] == "natural"]
     # cv keeps the speed and heading: 3 s of progress at its start speed, on a straight road.

@@ -7,7 +7,7 @@ import torch
 
 from adversary.cli import main
 from adversary.crash.attack import AttackConfig
-from adversary.crash.run import record_scenes, run_attacks, summarise
+from adversary.crash.run import record_scenes, run_attacks, summarise, table_row
 from adversary.crash.selection import SelectionModule
 from rasterize.errors import InputError
 from riskmap.infra.checkpoint import save_checkpoint
@@ -81,6 +81,13 @@ def test_summary_counts_every_scene_in_the_denominator():
     s = summarise([ok, miss])
     assert s["collision_rate"] == 0.5 and s["no_candidate"] == 1 and s["other_off_road_rate"] == 1.0
     assert s["collision_types"] == {"cut-in": 1} and s["solution_rate"] == 1.0
+    # a record written before the classification is unknown, never counted
+    assert s["failures"]["unknown"] == 1 and s["failures"]["counted"] == 0 and s["failures"]["trials"] == 2
+    counted = {**ok, "metrics": {**ok["metrics"], "failure": {
+        "fault": "at fault", "avoidable": True, "valid_attack": True, "counts": True}}}
+    s = summarise([counted, miss])
+    assert s["failures"]["counted"] == 1 and s["failures"]["counted_rate"] == 0.5 and s["failures"]["valid"] == 1
+    assert "1/2 (50.0" in table_row("x", s)
 
 
 def test_replan_hz_reaches_every_drive_and_the_default_keeps_old_run_json(scenes, tmp_path, monkeypatch):

@@ -50,16 +50,24 @@ def test_headline_chart_and_summary_come_first(report):
     assert text.index('id="summary"') < first_table and text.index('id="headline"') < first_table
     assert saved["images"]["headline"] == "figures/headline.png"
     assert page_summary(out / "report.html")["images"][0] == "figures/headline.png"
-    summary = saved["results"]["summary"]["text"]
-    assert html.escape(summary, quote=False) in text
-    # The paragraph quotes the by-family rows: each planner's worst cell with its interval.
-    for planner in ("cv", "idm"):
-        rows = [r for r in saved["results"]["by_family"] if r["planner"] == planner]
-        worst = max(rows, key=lambda r: r["collision_rate"]["value"])
-        rate = worst["collision_rate"]
-        assert f"{planner} " in summary
-        assert f"{100 * rate['value']:.0f}% [{100 * rate['lo']:.0f}, {100 * rate['hi']:.0f}]" in summary
-    assert "too wide to rank" in summary and "2 jobs per planner" in summary   # 2 scenes per cell
+    lead, summary = saved["results"]["summary"]["lead"], saved["results"]["summary"]["text"]
+    collisions = saved["results"]["summary_collisions"]["text"]
+    assert html.escape(summary, quote=False) in text and html.escape(collisions, quote=False) in text
+    # The failures that count lead, every collision follows: the lead sentence's counts are the
+    # comparison rows' classes summed.
+    assert text.index(html.escape(lead, quote=False)) < text.index(html.escape(collisions, quote=False))
+    classes = [r["failure_classes"] for r in saved["results"]["comparison"]]
+    assert lead.startswith(f"Of {sum(c['collisions'] for c in classes)} collisions in 12 finished jobs, "
+                           f"{sum(c['counted'] for c in classes)} count")
+    # Each paragraph quotes the by-family rows: each planner's worst cell with its interval.
+    for paragraph, metric in ((summary, "failure_rate"), (collisions, "collision_rate")):
+        for planner in ("cv", "idm"):
+            rows = [r for r in saved["results"]["by_family"] if r["planner"] == planner]
+            rate = max(rows, key=lambda r: r[metric]["value"])[metric]
+            assert f"{planner} " in paragraph
+            assert f"{100 * rate['hi']:.0f}%" in paragraph if rate["k"] == 0 else \
+                f"{100 * rate['value']:.0f}% [{100 * rate['lo']:.0f}, {100 * rate['hi']:.0f}]" in paragraph
+        assert "too wide to rank" in paragraph and "2 jobs per planner" in paragraph   # 2 scenes per cell
 
 
 def test_a_page_per_job_with_its_record(report, tiny_campaign):

@@ -1,4 +1,8 @@
-"""Solution check: could the ego alone have avoided a collision that an attack caused?
+"""Ego-only alternatives to a recorded drive, and STRIVE's solution check built on them.
+
+Both the solution check (here) and the avoidability of a failure (`riskmap.sim.failures`) ask
+whether the ego alone, driving differently from some step on while everybody else does what
+they did, would have hit nobody.
 
 STRIVE's solution rate asks whether an ego-only re-optimisation finds a collision-free trajectory
 against the adversarial scenario. Here the other agents replay what they did (the adversary
