@@ -39,6 +39,13 @@ from rasterize.errors import InputError
 from riskmap.sim.rollout import check_replan_hz
 
 
+# The validity terms' weights: the adversary-other overlap weighs as STRIVE's non-adversary
+# collisions (20 per metre of disc overlap); the kinematic excess 5 per squared unit, so that
+# 1 m/s² over a limit for one 0.5 s step costs about what 2 m of mean distance to the ego does.
+VALIDITY_COLLISION_WEIGHT = 20.0
+VALIDITY_KINEMATIC_WEIGHT = 5.0
+
+
 @dataclass(frozen=True)
 class AttackConfig:
     selector: str = "crash"
@@ -52,6 +59,8 @@ class AttackConfig:
                                         # measured (experiments/README, "CRASH at strength")
     stop_on_collision: bool = True
     time_weighting: str = "sum"         # GenerationConfig.time_weighting
+    validity_terms: bool = True         # the adversary-other collision and kinematic terms
+                                        # (adversary.crash.generate); False: the paper's eq. 8
 
     def __post_init__(self) -> None:
         if self.selector not in SELECTORS:
@@ -66,9 +75,12 @@ class AttackConfig:
                              f"{', '.join(TIME_WEIGHTINGS)}")
 
     def generation(self, closed_loop: bool) -> GenerationConfig:
+        validity = {"adversary_collision_weight": VALIDITY_COLLISION_WEIGHT,
+                    "kinematic_weight": VALIDITY_KINEMATIC_WEIGHT} if self.validity_terms else {}
         return GenerationConfig(iterations=self.iterations_closed_loop if closed_loop else self.iterations_replay,
                                 lr=self.lr, replan_every=self.replan_every,
-                                stop_on_collision=self.stop_on_collision, time_weighting=self.time_weighting)
+                                stop_on_collision=self.stop_on_collision, time_weighting=self.time_weighting,
+                                **validity)
 
 
 def replan_hz_of(attack: dict) -> int:

@@ -113,7 +113,8 @@ def _run_attack(args: argparse.Namespace) -> int:
                           iterations_replay=args.iterations or 300,
                           iterations_closed_loop=args.iterations or 200,
                           stop_on_collision=not args.full_iterations, lr=args.lr or AttackConfig.lr,
-                          time_weighting=args.time_weighting, replan_hz=args.replan_hz)
+                          time_weighting=args.time_weighting, replan_hz=args.replan_hz,
+                          validity_terms=not args.paper_loss)
     needs_selector = args.selector in ("crash", "crash-no-mam")
     traffic, selectors = default_models(Path(args.scenes), args.traffic_model, args.selector_model)
     summary = run_attacks(args.planner, Path(args.scenes), args.count, config, args.seed, Path(args.out),
@@ -196,6 +197,9 @@ def add_attack_parsers(subparsers) -> None:
     p.add_argument("--time-weighting", choices=TIME_WEIGHTINGS, default="sum",
                    help="sum: CRASH's adversarial loss over every future step; softmin: weighted "
                         "towards the step of closest approach")
+    p.add_argument("--paper-loss", action="store_true",
+                   help="generate with CRASH's eq. 8 alone, without the validity terms (the adversary's "
+                        "collisions with other agents and its kinematic excess; on by default)")
     p.add_argument("--panels", type=non_negative_int, default=0, help="write PNG panels of the first N scenes")
     p.add_argument("--resume", action="store_true")
     p.add_argument("--quiet", action="store_true")

@@ -303,6 +303,8 @@ def run_attacks(planner_spec: str, scenes_dir: Path, count: int, config: AttackC
     settings = asdict(config)
     if config.replan_hz == AttackConfig.replan_hz:
         del settings["replan_hz"]      # the default: run.json as written before the option, so they resume
+    if not config.validity_terms:
+        del settings["validity_terms"]  # the paper's loss: as written before the option, so they resume
     meta = {"planner": planner_spec, "scenes": str(scenes_dir), "count": count, "config": settings,
             "seed": seed, "traffic_model": str(traffic), "selector_model": str(selectors) if selectors else None}
     claim_out_dir(out, holds="attacks", marker="attacks", resume=resume, settings_file="run.json",
