@@ -162,7 +162,7 @@ def classify_highway_collision(monitor: EpisodeMonitor, states, valid, sizes) ->
     on the road network, the attack validated when the partner is its adversary; None when the
     partner was never recorded."""
     from riskmap.sim.failures import classify_failure
-    from riskmap.sim.metrics import on_network
+    from riskmap.sim.metrics import lane_width_at, on_network
 
     partner = monitor.collision.get("partner_id")
     if partner is None:
@@ -172,15 +172,6 @@ def classify_highway_collision(monitor: EpisodeMonitor, states, valid, sizes) ->
                             monitor.run.dt, attack=bool(monitor.collision["partner_is_adversary"]),
                             on_road=on_network(road), lane_width_m=lane_width_at(road, monitor.run.ego),
                             adversary_off_road=monitor.adversary_off_road)
-
-
-def lane_width_at(road, vehicle, default_m: float = 4.0) -> float:
-    """Width (m) of the lane the highway-env `vehicle` is on (`default_m` when it has none)."""
-    try:
-        lane = road.network.get_lane(vehicle.lane_index)
-        return float(lane.width_at(lane.local_coordinates(vehicle.position)[0]))
-    except (AttributeError, KeyError, TypeError, IndexError):
-        return default_m
 
 
 def record_of(episode: dict, monitor: EpisodeMonitor, extra: dict, planner=None) -> dict:

@@ -33,6 +33,7 @@ from riskmap.infra.provenance import provenance
 from riskmap.infra.rundir import claim_out_dir
 from riskmap.registry import cached_planner
 from riskmap.sim.episode import FAMILY_SETUPS, cached_env
+from riskmap.sim.failures import summarise_failures
 from riskmap.sim.metrics import (
     SafetyConfig,
     ade_m,
@@ -172,12 +173,17 @@ def planner_task(config: EvalConfig, out: Path, spec: str, episode: int) -> dict
     from riskmap.sim.plan import requires_log
     from riskmap.sim.rollout import DriveConfig, drive_episode
 
+    from riskmap.sim.failures import classify_failure, first_contact
+
     log = HumanLog.load(_log_path(out, episode))
     human_xy = log.ego_xy()
     base = {"label": planner_label(spec), "episode": episode, "mode": config.mode}
     if spec == "idm":
         metrics = trajectory_metrics(log.states, log.valid, log.sizes, log.ego_id, log.dt_s, human_xy,
                                      config.safety)
+        contact = first_contact(log.states, log.valid, log.sizes, log.ego_id) if log.crashed else None
+        base["failure"] = None if contact is None else classify_failure(
+            log.states, log.valid, log.sizes, log.ego_id, contact[1], contact[0], log.dt_s)
         return _table_record(spec, base, metrics, log.crashed, log.off_road, None)
     env = cached_env(config.env_id, config.control_hz)
     planner = _planner(spec, config.seed)
@@ -195,7 +201,22 @@ def planner_task(config: EvalConfig, out: Path, spec: str, episode: int) -> dict
     states, valid, sizes, _ = run.recorder.arrays()
     metrics = trajectory_metrics(states, valid, sizes, run.recorder.ego_id, run.dt, human_xy,
                                  config.safety)
+    base["failure"] = classify_drive(run, states, valid, sizes) if record["collided"] else None
     return _table_record(spec, base, metrics, record["collided"], record["off_road"], record)
+
+
+def classify_drive(run, states, valid, sizes) -> dict | None:
+    """The classification (`riskmap.sim.failures`) of a highway-env drive's first contact, lane
+    changes on its road network; None when the crash flag came without a box overlap in the
+    record (the flag's geometry is highway-env's own)."""
+    from riskmap.sim.failures import classify_failure, first_contact
+    from riskmap.sim.metrics import lane_width_at, on_network
+
+    contact = first_contact(states, valid, sizes, run.recorder.ego_id)
+    if contact is None:
+        return None
+    return classify_failure(states, valid, sizes, run.recorder.ego_id, contact[1], contact[0], run.dt,
+                            on_road=on_network(run.base.road), lane_width_m=lane_width_at(run.base.road, run.ego))
 
 
 def _run_planner_task(config: EvalConfig, out: Path, spec: str, episode: int) -> tuple[str, int, dict]:
@@ -216,6 +237,9 @@ def summarise(config: EvalConfig, records: list[dict]) -> dict:
             entry[key] = summarise_metric([r[key] for r in rows])
         for key in RATES:
             entry[f"{key}_rate"] = float(np.mean([bool(r[key]) for r in rows]))
+        collided = [r for r in rows if r["collided"]]
+        # every collision classified (riskmap.sim.failures); a record without it is unknown
+        entry["failures"] = summarise_failures([r.get("failure") for r in collided], len(rows))
         dangerous = sum(r["dangerous"] for r in rows)
         encounters = sum(r["encounters"] for r in rows)
         entry["safety_pct_pooled"] = safety_pct(dangerous, encounters)
@@ -228,10 +252,18 @@ def _fmt(value, digits: int = 2) -> str:
     return "–" if value is None else f"{value:.{digits}f}"
 
 
+def _counted(entry: dict) -> str:
+    """The collisions that count (valid, avoidable, at fault), "?" with unknown ones beside."""
+    f = entry.get("failures")
+    if not f:
+        return "?"
+    return f"{f['counted']}" + (f", {f['unknown']} unknown" if f["unknown"] else "")
+
+
 def markdown_table(config: EvalConfig, table: dict) -> str:
     lines = [(f"{config.env_id}, mode {config.mode}, seed {config.seed}: mean / 90th percentile over "
              "episodes"), "",
-             ("| planner | episodes | Safety % | ADE (m) | Goal (m) | collisions | off-road | "
+             ("| planner | episodes | Safety % (danger) | ADE (m) | Goal (m) | collisions (that count) | off-road | "
              "progress (m) | jerk (m/s³) | plan ms/call |"),
              "|---|---|---|---|---|---|---|---|---|---|"]
     for entry in table.values():
@@ -240,7 +272,7 @@ def markdown_table(config: EvalConfig, table: dict) -> str:
 
         lines.append(
             f"| {entry['label']} | {entry['episodes']} | {pair('safety_pct', 1)} | {pair('ade_m')} | "
-            f"{pair('goal_error_m')} | {100 * entry['collided_rate']:.0f}% | "
+            f"{pair('goal_error_m')} | {100 * entry['collided_rate']:.0f}% ({_counted(entry)}) | "
             f"{100 * entry['off_road_rate']:.0f}% | {pair('distance_m', 0)} | {pair('jerk_mps3')} | "
             f"{pair('plan_ms_mean', 1)} |")
     return "\n".join(lines) + "\n"

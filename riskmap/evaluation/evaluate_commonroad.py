@@ -13,8 +13,12 @@ ones), then OUT/results.json and OUT/table.md with means and 90th percentiles.
 `idm` is the rule-based baseline: IDM + MOBIL along the recorded vehicle's lanelets
 (`riskmap.sim.recorded_idm`).
 Safety % is the simulated scenes' (`riskmap.sim.metrics`: share of encounters with a recorded vehicle
-within 30 m that are dangerously close), per episode, then mean and 90th percentile; the share
-of episodes without a collision or leaving the road is reported beside it.
+within 30 m that are dangerously close; the planner paper's name for a danger rate, lower is
+better), per episode, then mean and 90th percentile; the share of episodes without a collision
+or leaving the road is reported beside it. Every collision is classified
+(`riskmap.sim.failures`): at fault / struck from behind / side, and whether a driver reacting to
+what it could see would have avoided it by braking or speeding up; "that count" are at fault
+and avoidable.
 Red-light violations (recordings with traffic lights: the ego's front crossing a stop line of
 its lane while the light for its turn is red, amber counted as red;
 `riskmap.sim.commonroad_replay`) are summed over the episodes beside the collisions, with the
@@ -42,6 +46,7 @@ from riskmap.infra.atomic import atomic_write, write_json
 from riskmap.infra.parallel import run_parallel
 from riskmap.infra.rundir import claim_out_dir
 from riskmap.sim.record import current_names
+from riskmap.sim.failures import summarise_failures
 
 METRICS = ("safety_pct", "ade_m", "goal_error_m", "distance_m", "human_distance_m", "min_gap_m")
 GAP_CAP_M = 1e3       # a min gap of None (nobody within the gap radius) counts as this far
@@ -102,6 +107,7 @@ def summarise(records: list[dict]) -> dict:
         values = [r.get(key) for r in records]
         return None if any(v is None for v in values) else int(sum(values))
 
+    classes = summarise_failures([r["collision"].get("failure") for r in records if r["collision"]], len(records))
     return {"episodes": len(records),
             "safe_episodes_pct": 100.0 * float(np.mean([not (r["collided"] or r["off_road"])
                                                         for r in records])),
@@ -112,10 +118,10 @@ def summarise(records: list[dict]) -> dict:
                                              int(sum(r["red_light_violations"] > 0 for r in records))),
             "collision_rate": float(np.mean([r["collided"] for r in records])),
             # A log-replayed vehicle cannot see the ego: hit from behind is the replay's doing,
-            # driving into a vehicle ahead the planner's (at fault).
-            "at_fault": int(sum(bool(r["collision"]) and r["collision"]["other_ahead"] for r in records)),
-            "struck_from_behind": int(sum(bool(r["collision"]) and not r["collision"]["other_ahead"]
-                                          for r in records)),
+            # driving into a vehicle ahead the planner's (at fault). The classes of every
+            # collision (riskmap.sim.failures); a record written before them is "unknown".
+            **{k: classes[k] for k in ("at_fault", "struck_from_behind", "side", "avoidable", "counted",
+                                       "unknown")},
             "off_road_rate": float(np.mean([r["off_road"] for r in records])),
             **{key: stats(key) for key in METRICS}}
 
@@ -125,15 +131,17 @@ def _count(value) -> str:
 
 
 def markdown_table(results: dict) -> str:
-    lines = [("| planner | episodes | Safety % | safe episodes % | collisions (at fault / struck from "
-              "behind) | red-light violations (human) | off-road | ADE (m) | goal error (m) | "
-              "driven (m) | human (m) |"),
+    lines = [("| planner | episodes | Safety % (danger) | safe episodes % | collisions (that count: at fault and "
+              "avoidable; at fault / struck from behind / side) | red-light violations (human) | off-road | ADE (m) | "
+              "goal error (m) | driven (m) | human (m) |"),
              "|---|---|---|---|---|---|---|---|---|---|---|"]
     for spec, s in results.items():
         lines.append(
             f"| {spec} | {s['episodes']} | {s['safety_pct']['mean']:.1f} / {s['safety_pct']['p90']:.1f} | "
             f"{s['safe_episodes_pct']:.0f} | "
-            f"{100 * s['collision_rate']:.0f}% ({s['at_fault']} / {s['struck_from_behind']}) | "
+            f"{100 * s['collision_rate']:.0f}% ({_count(s.get('counted'))}; {s['at_fault']} / "
+            f"{s['struck_from_behind']} / {_count(s.get('side'))}"
+            f"{'; ' + str(s['unknown']) + ' unknown' if s.get('unknown') else ''}) | "
             f"{_count(s.get('red_light_violations'))} ({_count(s.get('human_red_light_violations'))}) | "
             f"{100 * s['off_road_rate']:.0f}% | {s['ade_m']['mean']:.2f} / {s['ade_m']['p90']:.2f} | "
             f"{s['goal_error_m']['mean']:.2f} / {s['goal_error_m']['p90']:.2f} | "

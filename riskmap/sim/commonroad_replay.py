@@ -295,10 +295,29 @@ class CommonRoadWorld:
             # Log-replayed traffic does not react: a vehicle behind may run into an ego that
             # drives slower than the human did. Say which it was.
             self.collision = {"other_id": int(self.traffic.ids[agent]), "other_ahead": bool(
-                ego_from_world(other_xy, xy, heading)[0] > 0)}
+                ego_from_world(other_xy, xy, heading)[0] > 0), "failure": self.classify_collision(agent)}
             return
         if centre_off_lane(self.road, self.vehicle, self.config.off_road_margin_m):
             self.off_network = True
+
+    def classify_collision(self, agent: int, radius_m: float = 80.0) -> dict:
+        """`riskmap.sim.failures.classify_failure` of the ego's collision with `agent` (an index
+        into `traffic`) now, over the drive so far (history included) and every vehicle within
+        `radius_m` now; lane changes are not tried (longitudinal alternatives only)."""
+        from riskmap.sim.failures import classify_failure
+
+        times = np.asarray(self.track_t)
+        ego = np.asarray(self.track).reshape(-1, STATE_DIM)
+        now, present = self.others_at(self.others, times[-1:])
+        near = [a for i, a in enumerate(self.others)
+                if present[i, 0] and np.linalg.norm(now[i, 0, :2] - ego[-1, :2]) < radius_m]
+        near = list(dict.fromkeys([int(agent), *near]))
+        others, valid = self.others_at(np.array(near), times)
+        states = np.concatenate([ego[None], others])
+        valid = np.concatenate([np.ones((1, len(times)), bool), valid])
+        sizes = np.concatenate([self.traffic.sizes[[self.ego_index]], self.traffic.sizes[near]])
+        return classify_failure(states, valid, sizes, 0, 1, len(times) - 1, self.dt,
+                                from_step=self.history_len - 1)
 
     def _move_ego(self) -> np.ndarray:
         """One `dt` of the highway-env ego; its world state [6] afterwards."""

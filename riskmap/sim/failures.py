@@ -323,3 +323,22 @@ def summarise_failures(classified: list[dict | None], trials: int) -> dict:
         "counted_rate": counted / trials if trials else None,
         "counted_ci95": None if ci is None else [round(ci["lo"], 4), round(ci["hi"], 4)],
     }
+
+
+def first_contact(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, ego: int,
+                  from_step: int = 0) -> tuple[int, int] | None:
+    """(step, agent) of the ego's first box overlap with another agent from `from_step` on (the
+    nearest such agent when several); None if it never touches one. For drives whose record
+    keeps no partner (a highway-env episode's crash flag names none)."""
+    reach = 0.5 * (np.hypot(*sizes[ego]) + np.hypot(sizes[:, 0], sizes[:, 1]))
+    for k in range(from_step, states.shape[1]):
+        if not valid[ego, k]:
+            continue
+        distance = np.linalg.norm(states[:, k, :2] - states[ego, k, :2], axis=1)
+        near = np.flatnonzero(valid[:, k] & (distance < reach))
+        mine = box_corners(states[ego, k, :2], states[ego, k, 2:4], *sizes[ego])
+        hits = [a for a in near[np.argsort(distance[near])] if a != ego
+                and boxes_overlap(mine, box_corners(states[a, k, :2], states[a, k, 2:4], *sizes[a]))]
+        if hits:
+            return k, int(hits[0])
+    return None

@@ -70,7 +70,7 @@ from rasterize.geometry import box_gap, boxes_overlap
 __all__ = [
     "CAMPAIGN_COLLISION_TYPES", "COARSE_COLLISION_NAMES", "COLLISION_TYPES", "STRIVE", "ClosingSafetyConfig",
     "SafetyConfig", "StriveConfig", "ade_m", "box_gap", "box_iou", "box_off_road", "box_polygon",
-    "centre_off_lane", "classify_collision", "closing_dangerous_encounters", "coarse_collision_name",
+    "centre_off_lane", "classify_collision", "lane_width_at", "closing_dangerous_encounters", "coarse_collision_name",
     "coarse_collision_type", "dangerous_encounters", "drivable_area", "goal_error_m", "mean_jerk_mps3",
     "min_box_gap", "off_road_fraction", "on_network", "overlap_within", "path_length_m", "safety_pct", "stop_line_crossings",
     "summarise_metric", "vehicle_box",
@@ -322,6 +322,15 @@ def on_network(road, margin_m: float = 0.0):
         return not centre_off_lane(road, vehicle, margin_m)
 
     return on_road
+
+
+def lane_width_at(road, vehicle, default_m: float = 4.0) -> float:
+    """Width (m) of the lane the highway-env `vehicle` is on (`default_m` when it has none)."""
+    try:
+        lane = road.network.get_lane(vehicle.lane_index)
+        return float(lane.width_at(lane.local_coordinates(vehicle.position)[0]))
+    except (AttributeError, KeyError, TypeError, IndexError):
+        return default_m
 
 
 # ---- collision type -------------------------------------------------------------------------

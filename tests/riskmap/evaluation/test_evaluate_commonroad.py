@@ -55,8 +55,10 @@ def test_workers_give_the_same_records_and_bad_input_leaves_nothing(tmp_path):
     strip = lambda s: {k: v for k, v in s.items() if not k.startswith("plan_ms")}  # noqa: E731
     assert {k: strip(v) for k, v in one.items()} == {k: strip(v) for k, v in two.items()}
     for spec in ("replay", "cv"):
-        assert one[spec]["at_fault"] + one[spec]["struck_from_behind"] == round(
-            one[spec]["collision_rate"] * one[spec]["episodes"])
+        # every collision classified: the fault classes add up to the collisions, none unknown
+        s = one[spec]
+        assert s["at_fault"] + s["struck_from_behind"] + s["side"] == round(s["collision_rate"] * s["episodes"])
+        assert s["unknown"] == 0 and s["counted"] <= s["at_fault"] and s["counted"] <= s["avoidable"]
     never = tmp_path / "never"
     with pytest.raises(InputError, match="unknown planner spec"):
         evaluate_commonroad([FIXTURES], ("replay", "nope:x"), never, progress=False)
