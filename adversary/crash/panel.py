@@ -3,7 +3,9 @@
 Lanes from the window; every window row's 2 s past in grey; the generated (spliced) futures of
 the other rows in blue and the adversary's in red; the ego's closed-loop path in green (dashed:
 the human's logged future for comparison). Boxes are drawn at the collision time (the final
-time without one), with the collision point marked, and the key metrics in the title.
+time without one), with the collision point marked, and the key metrics in the title. A
+collision the ego could have avoided (`riskmap.sim.failures`) shows the alternative that avoids
+it, dotted, from where the ego reacted (a diamond) to the collision time, with its box there.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from adversary.crash.judge import Rollout, splice_tracks
 from adversary.crash.scenes import SceneRecord
 from rasterize.frames import box_corners
 from riskmap.infra.atomic import atomic_write
+from riskmap.sim.failures import failure_words
 from riskmap.sim.record import current_names
 
 _GREY, _BLUE, _RED, _GREEN = "0.55", "tab:blue", "tab:red", "tab:green"
@@ -27,6 +30,8 @@ def _title_line(metrics: dict) -> str:
         what = (f"collision {metrics['collision_type']} at {metrics['collision_time_s']:.1f} s, "
                 f"IoU {metrics['collision_iou']:.2f}, |dv| {metrics['kinematic_value_mps']:.1f} m/s, "
                 f"solution {'yes' if metrics['solution_found'] else 'no'}")
+        if metrics.get("failure"):
+            what += "; " + failure_words(metrics["failure"])
     else:
         gap = metrics["min_gap_m"]
         what = "no collision" + (f", min gap {gap:.1f} m" if gap is not None else "")
@@ -92,6 +97,20 @@ def save_attack_panel(record: SceneRecord, tracks: np.ndarray, rows, adversary_r
     ego_state = rollout.states[ego_rec, coll_step]
     ax.add_patch(PatchPolygon(box_corners(ego_state[:2], ego_state[2:4], *rollout.sizes[ego_rec]),
                               closed=True, facecolor=_GREEN, alpha=0.45, edgecolor=_GREEN, zorder=6))
+    failure = metrics.get("failure") or {}
+    if metrics["collision"] and failure.get("avoidance"):
+        from riskmap.sim.alternatives import alternative_track
+
+        react = round(failure["reaction_time_s"] / rollout.dt_s)
+        avoid = failure["avoidance"]
+        alt = alternative_track(rollout.states, rollout.valid, ego_rec, react, coll_step - react, rollout.dt_s,
+                                avoid["accel_mps2"], avoid["offset_m"], path_until=rollout.states.shape[1] - 1)
+        ax.plot(alt[:, 0], alt[:, 1], color="black", linewidth=1.6, linestyle=":", zorder=7,
+                label=f"avoids it: {avoid['accel_mps2']:+.0f} m/s²" + (f", {avoid['offset_m']:+.1f} m across"
+                                                                      if avoid["offset_m"] else ""))
+        ax.plot(*rollout.states[ego_rec, react, :2], marker="D", color="black", markersize=5, zorder=7)
+        ax.add_patch(PatchPolygon(box_corners(alt[-1, :2], alt[-1, 2:4], *rollout.sizes[ego_rec]), closed=True,
+                                  fill=False, edgecolor="black", linestyle=":", zorder=7))
     if metrics["collision"]:
         adv_state = rollout.states[int(row_ids[adversary_row]), coll_step]
         point = 0.5 * (ego_state[:2] + adv_state[:2])

@@ -48,7 +48,7 @@ def outcome(record: dict) -> str:
         return f"collision ({record['collision_type']}, {record['kinematic_mps']:.1f} m/s)"
     if record["safety_pct"] is None:
         return "no collision"
-    return f"no collision, Safety {record['safety_pct']:.0f}%"
+    return f"no collision, Safety % (danger) {record['safety_pct']:.0f}"
 
 
 def _save_png(image, path: Path) -> None:

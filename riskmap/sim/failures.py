@@ -342,3 +342,46 @@ def first_contact(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, ego:
         if hits:
             return k, int(hits[0])
     return None
+
+
+def failure_words(failure: dict) -> str:
+    """A classification in a few words: "counts: at fault, avoidable, valid attack" or "does not
+    count: struck from behind, unavoidable" (what a panel's title or a table cell says)."""
+    if failure.get("fault") in (None, UNKNOWN):
+        return "unclassified (a record without trajectories)"
+    words = [failure["fault"], "avoidable" if failure["avoidable"] else "unavoidable"]
+    if "valid_attack" in failure:
+        words.append("valid attack" if failure["valid_attack"] else
+                     "invalid attack (" + ", ".join(failure["invalid_reasons"]) + ")")
+    return ("counts: " if failure["counts"] else "does not count: ") + ", ".join(words)
+
+
+def failure_explanation(failure: dict | None) -> str | None:
+    """The sentences a job page says about its collision's class and why (None: no collision)."""
+    if failure is None:
+        return None
+    if failure.get("fault") in (None, UNKNOWN):
+        return "This collision is not classified: its record was written without the trajectories it needs."
+    head = ("It counts as a failure of the planner" if failure["counts"]
+            else "It does not count as a failure of the planner")
+    fault = {"at fault": "the other vehicle was ahead of the ego (at fault)",
+             "struck from behind": "the other vehicle came from behind (struck from behind)",
+             "side": "the other vehicle was beside the ego (a side contact)"}[failure["fault"]]
+    seen = f"the threat was visible at t = {failure['visible_time_s']:.1f} s"
+    avoid = failure.get("avoidance")
+    if avoid:
+        how = (f"braking at {-avoid['accel_mps2']:.0f} m/s²" if avoid["accel_mps2"] < 0 else
+               "holding its speed" if avoid["accel_mps2"] == 0 else f"speeding up at {avoid['accel_mps2']:.0f} m/s²")
+        if avoid["offset_m"]:
+            how += f" while changing lanes {'left' if avoid['offset_m'] > 0 else 'right'}"
+        avoidable = (f"{seen}, and {how} from t = {failure['reaction_time_s']:.1f} s (0.5 s later) "
+                     "would have hit nobody (avoidable)")
+    else:
+        avoidable = (f"{seen}, and no braking, holding, speeding up or lane change from "
+                     f"t = {failure['reaction_time_s']:.1f} s missed every vehicle (unavoidable)")
+    text = f"{head}: {fault}; {avoidable}"
+    if "valid_attack" in failure:
+        text += ("; the adversary did it alone, on the road and within a car's limits (a valid attack)"
+                 if failure["valid_attack"] else
+                 "; the attack is not valid: " + ", ".join(failure["invalid_reasons"]))
+    return text + "."

@@ -50,5 +50,8 @@ def test_every_job_gets_a_page_even_without_pictures(tmp_path):
     assert json.loads(html.unescape(shown)) == records[2]
     assert "cannot be read" in (out / "jobs" / "ok-unreadable.html").read_text()
     assert "No artifact was stored" in (out / "jobs" / "ok-collided.html").read_text()
+    # a collision without its classification (a record from before it) says so, never guesses
+    assert "This collision is not classified" in (out / "jobs" / "ok-collided.html").read_text()
+    assert 'id="failure"' not in (out / "jobs" / "ok-unreadable.html").read_text()
     assert 'href="jobs/failed.html"' in (out / "report.html").read_text()     # from the failures table
     assert site_problems(out / "report.html") == []

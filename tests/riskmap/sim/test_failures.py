@@ -169,3 +169,20 @@ def test_a_record_without_trajectories_is_unknown_never_guessed():
     out = unknown_failure(attack=True)
     assert out["fault"] == "unknown" and out["avoidable"] is None and out["counts"] is None
     assert out["valid_attack"] is None
+
+
+def test_the_explanation_says_the_class_and_the_way_out():
+    from riskmap.sim.failures import failure_explanation, failure_words
+
+    steps = 60
+    t = DT * np.arange(steps)
+    ego = track(20.0 * t, np.zeros(steps))
+    cutter = track(30.0 + 12.0 * t, LANE * (1.0 - smoothstep((t - 0.5) / 2.0)))
+    states, valid, sizes = scene(ego, cutter)
+    out = classify_failure(states, valid, sizes, 0, 1, first_overlap(states, 0, 1), DT, attack=True,
+                           lane_width_m=LANE)
+    text = failure_explanation(out)
+    assert text.startswith("It counts as a failure of the planner: the other vehicle was ahead")
+    assert f"braking at {-out['avoidance']['accel_mps2']:.0f} m/s²" in text and "valid attack" in text
+    assert failure_words(out) == "counts: at fault, avoidable, valid attack"
+    assert "not classified" in failure_explanation(unknown_failure())
