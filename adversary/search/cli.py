@@ -13,7 +13,8 @@ from riskmap.infra.cli import add_config_options, config_from_args, positive_int
 def _print_summary(summary: dict, out: str) -> None:
     share = summary["collision_share"]
     print(f"{summary['collisions']} of {summary['evaluations']} evaluations collided "
-          f"({100 * share:.0f}%); {summary['evaluations'] - summary['feasible']} infeasible; "
+          f"({100 * share:.0f}%), {summary['failures']['counted']} of them valid, avoidable and at fault "
+          f"({summary['failures']['unknown']} unclassified); {summary['evaluations'] - summary['feasible']} infeasible; "
           f"failure diversity {summary['failure_diversity']}; results in {out}")
     best = summary["least_altered_failure"]
     if best:

@@ -79,6 +79,7 @@ class Trajectory:
 
     ego_xy: list
     target_xy: list
+    failure: dict | None = None       # the collision's class (riskmap.sim.failures), None without one
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray]:
         return np.asarray(self.ego_xy), np.asarray(self.target_xy)
@@ -98,7 +99,10 @@ def run_scenario(template: Template, values: np.ndarray, config: EvaluationConfi
     scenario = Scenario(template, template.as_dict(values), config.seed, 1.0 / config.control_hz)
     trajectory = Trajectory([], [])
 
+    driven = {}
+
     def log(run):
+        driven["run"] = run
         if not trajectory.ego_xy:
             trajectory.ego_xy.append(world_from_highway_env(start_ego))
             trajectory.target_xy.append(world_from_highway_env(start_target))
@@ -124,7 +128,27 @@ def run_scenario(template: Template, values: np.ndarray, config: EvaluationConfi
     hooks = DriveHooks(setup=setup, on_reset=on_reset, on_ready=tuple(on_ready), perceive=scenario.perceive,
                        on_plan=frames, on_step=log)
     record = drive_episode(env, planner, drive_config, 0, hooks)
+    if record["collided"] and "run" in driven:
+        trajectory.failure = classify_scenario_collision(driven["run"], scenario.target)
     return record, trajectory
+
+
+def classify_scenario_collision(run, target) -> dict | None:
+    """The class of a driven scenario's first contact (`riskmap.sim.failures`); an attack when the
+    ego's partner is the scenario's target, which the search steers."""
+    from riskmap.sim.failures import classify_failure, first_contact
+    from riskmap.sim.metrics import lane_width_at, on_network
+
+    states, valid, sizes, _ = run.recorder.arrays()
+    ego = run.recorder.ego_id
+    contact = first_contact(states, valid, sizes, ego)
+    if contact is None:
+        return None
+    step, partner = contact
+    road = run.base.road
+    return classify_failure(states, valid, sizes, ego, partner, step, run.dt,
+                            attack=partner == run.recorder.known_id(target), on_road=on_network(road),
+                            lane_width_m=lane_width_at(road, run.ego))
 
 
 def evaluate(template: Template, values: np.ndarray, config: EvaluationConfig) -> dict:
@@ -147,7 +171,7 @@ def evaluate(template: Template, values: np.ndarray, config: EvaluationConfig) -
     collided = bool(drive["collided"])
     f = penalised_objectives(journey, total, alteration, collided, objective_scales(template, config))
     return record | {
-        "collided": collided, "off_road": bool(drive["off_road"]),
+        "collided": collided, "failure": trajectory.failure, "off_road": bool(drive["off_road"]),
         "simulated_s": drive["simulated_s"], "journey_m": journey, "total_distance_m": total,
         "min_gap_m": drive["min_gap_m"], "F": f.tolist(),
     }

@@ -1,7 +1,8 @@
 """Summary and figures of one search run (OUT of `adversary search`).
 
-    summary.json                     collision share, per-generation counts, failure diversity,
-                                     the least-altered failure
+    summary.json                     collision share, the failures that count among them
+                                     (riskmap.sim.failures), per-generation counts, failure
+                                     diversity, the least-altered failure
     collisions_per_generation.png    collisions per generation (the search paper's Fig. 10)
     best_failure_evolution.png       per generation, the least-altered failing vector (Figs. 11-12)
     pareto_front.png                 objectives of every feasible evaluation, first front marked
@@ -21,6 +22,7 @@ import numpy as np
 
 from adversary.search.scenarios import Template, get_template
 from riskmap.infra.atomic import write_json
+from riskmap.sim.failures import summarise_failures
 
 
 def load_run(out: Path) -> tuple[dict, list[list[dict]]]:
@@ -193,6 +195,9 @@ def write_report(out: Path, frames: bool = True) -> dict:
         "feasible": sum(r["feasible"] for r in records),
         "collisions": int(sum(counts)),
         "collision_share": sum(counts) / len(records) if records else None,
+        # the collisions that count (valid, avoidable, at fault) and each class, over every
+        # evaluation; evaluations stored before the classification count as unknown
+        "failures": summarise_failures([r.get("failure") for r in records if r["collided"]], len(records)),
         "collisions_per_generation": counts,
         "evaluations_per_generation": sizes,
         "distinct_failures": len(unique_failing),

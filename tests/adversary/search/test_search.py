@@ -37,6 +37,10 @@ def test_tiny_search_stores_and_resumes(tmp_path, monkeypatch, algorithm):
         assert (out / name).stat().st_size > 1000
     if summary["collisions"]:
         assert list((out / "best_failure").glob("frame_*.png"))
+    # every collision classified: the classes add up, none unknown
+    f = summary["failures"]
+    assert f["collisions"] == summary["collisions"] and f["unknown"] == 0
+    assert f["at_fault"] + f["struck_from_behind"] + f["side"] == summary["collisions"]
 
     # Resume: the same vectors are asked for and all are read back; nothing is driven again.
     def must_not_drive(*args, **kwargs):
