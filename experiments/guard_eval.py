@@ -5,7 +5,9 @@ neighbour from `riskmap.guard.aggressors`), the same episodes (same seed, same t
 driven by a planner alone, with the deceleration plan always on at high speed
 (`guard-always:SPEC`), and with the TGAT-triggered plan (`guard:SPEC`). Reported per cell:
 collision rate, progress (distance, mean speed), decision frames, interventions and the BDI
-intervention ratio (share of decision frames that System 2 took over), System 1 / System 2 ms.
+intervention ratio (share of decision frames that System 2 took over), System 1 / System 2 ms;
+each collision's class (`riskmap.sim.failures`: at fault, avoidable, and for the aggressor's a
+valid attack) and how many count.
 
     .venv/bin/python experiments/guard_eval.py --out out/guard_eval --episodes 8 --seed 100 \
         --inner riskmap --variants alone,always,tgat
@@ -22,10 +24,12 @@ from pathlib import Path
 
 import numpy as np
 
+from adversary.search.evaluation import classify_scenario_collision
 from riskmap.guard.aggressors import AggressorHook
 from riskmap.infra.atomic import write_json
 from riskmap.infra.stats import wilson
 from riskmap.registry import make_planner
+from riskmap.sim.failures import summarise_failures
 from riskmap.sim.episode import make_env
 from riskmap.sim.rollout import DriveConfig, DriveHooks, drive_episode
 
@@ -64,7 +68,11 @@ def run_cell(out: Path, env_id: str, scene: str, inner: str, variant: str, episo
         if path.exists():
             continue
         hooks = (AggressorHook(),) if scene == "aggressive" else ()
-        record = drive_episode(env, planner, config, episode, hooks=DriveHooks(on_ready=hooks))
+        driven = {}
+        record = drive_episode(env, planner, config, episode,
+                               hooks=DriveHooks(on_ready=hooks, on_step=lambda run: driven.update(run=run)))
+        if record["collided"] and "run" in driven:       # the collision's class (riskmap.sim.failures)
+            record["failure"] = classify_scenario_collision(driven["run"], hooks[0].aggressor if hooks else None)
         guard = getattr(planner, "guard", None)
         record.update({"spec": spec + (f" ({option})" if option else ""), "scene": scene, "variant": variant, "inner": inner,
                        "aggressor": bool(hooks and hooks[0].aggressor is not None)})
@@ -92,6 +100,8 @@ def summarise(out: Path) -> list[dict]:
             "collisions": int(sum(r["collided"] for r in records)),
             "collision_ci": wilson(int(sum(r["collided"] for r in records)), len(records)), "hard": hard,
             "collision_rate": float(np.mean([r["collided"] for r in records])),
+            # valid, avoidable, at fault (riskmap.sim.failures); records from before: unknown
+            "failures": summarise_failures([r.get("failure") for r in records if r["collided"]], len(records)),
             "distance_m": float(np.mean([r["distance_m"] for r in records])),
             "mean_speed_mps": float(np.mean([r["mean_speed_mps"] for r in records])),
             "frames": frames, "interventions": interventions,
@@ -103,13 +113,20 @@ def summarise(out: Path) -> list[dict]:
 
 
 def markdown(rows: list[dict]) -> str:
-    lines = [("| env | scene | planner | variant | episodes | collisions [95% CI] | distance (m) | "
-             "mean speed (m/s) | frames | interventions (hard) | BDI ratio |"), "|" + "---|" * 11]
+    lines = [("| env | scene | planner | variant | episodes | collisions [95% CI] | that count [95% CI] | "
+              "avoidable / at fault / struck from behind / side / valid attack / unknown | distance (m) | "
+             "mean speed (m/s) | frames | interventions (hard) | BDI ratio |"), "|" + "---|" * 13]
     for r in rows:
         ratio = f"{r['intervention_ratio']:.3f}" if r["intervention_ratio"] is not None else "–"
         ci = r["collision_ci"]
+        f = r.get("failures") or summarise_failures([None] * r["collisions"], r["episodes"])
+        fc = f["counted_ci95"]
+        classes = (f"{f['avoidable']} / {f['at_fault']} / {f['struck_from_behind']} / {f['side']} / "
+                   f"{'–' if f['valid'] is None else f['valid']} / {f['unknown']}")
         lines.append(f"| {r['env']} | {r['scene']} | {r['inner']} | {r['variant']} | {r['episodes']} | "
                      f"{r['collisions']} ({100 * ci['value']:.0f}% [{100 * ci['lo']:.0f}–{100 * ci['hi']:.0f}]) | "
+                     f"{f['counted']} ({100 * f['counted_rate']:.0f}% [{100 * fc[0]:.0f}–{100 * fc[1]:.0f}]) | "
+                     f"{classes} | "
                      f"{r['distance_m']:.0f} | {r['mean_speed_mps']:.1f} | {r['frames'] or '–'} | "
                      f"{r['interventions'] or 0} ({r['hard']}) | {ratio} |")
     return "\n".join(lines) + "\n"

@@ -141,7 +141,7 @@ def classify_scenario_collision(run, target) -> dict | None:
 
     states, valid, sizes, _ = run.recorder.arrays()
     ego = run.recorder.ego_id
-    contact = first_contact(states, valid, sizes, ego)
+    contact = first_contact(states, valid, sizes, ego, crash_flagged=True)
     if contact is None:
         return None
     step, partner = contact

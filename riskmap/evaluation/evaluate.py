@@ -212,7 +212,7 @@ def classify_drive(run, states, valid, sizes) -> dict | None:
     from riskmap.sim.failures import classify_failure, first_contact
     from riskmap.sim.metrics import lane_width_at, on_network
 
-    contact = first_contact(states, valid, sizes, run.recorder.ego_id)
+    contact = first_contact(states, valid, sizes, run.recorder.ego_id, crash_flagged=True)
     if contact is None:
         return None
     return classify_failure(states, valid, sizes, run.recorder.ego_id, contact[1], contact[0], run.dt,

@@ -59,7 +59,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rasterize.frames import box_corners
-from rasterize.geometry import boxes_overlap
+from rasterize.geometry import box_gap, boxes_overlap
 from riskmap.sim.alternatives import first_clear_alternative
 from riskmap.sim.metrics import STRIVE, box_iou, overlap_within
 
@@ -325,11 +325,18 @@ def summarise_failures(classified: list[dict | None], trials: int) -> dict:
     }
 
 
+# highway-env flags a crash when two boxes will intersect within the step (its check moves them
+# by their velocities), so a crashed record's boxes may stop short of touching: the nearest box
+# within this gap at the ego's last step is taken as the partner then.
+CRASH_FLAG_GAP_M = 3.0
+
+
 def first_contact(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, ego: int,
-                  from_step: int = 0) -> tuple[int, int] | None:
+                  from_step: int = 0, crash_flagged: bool = False) -> tuple[int, int] | None:
     """(step, agent) of the ego's first box overlap with another agent from `from_step` on (the
     nearest such agent when several); None if it never touches one. For drives whose record
-    keeps no partner (a highway-env episode's crash flag names none)."""
+    keeps no partner (a highway-env episode's crash flag names none): with `crash_flagged` and no
+    overlap, the ego's last step and the agent nearest to it there within CRASH_FLAG_GAP_M."""
     reach = 0.5 * (np.hypot(*sizes[ego]) + np.hypot(sizes[:, 0], sizes[:, 1]))
     for k in range(from_step, states.shape[1]):
         if not valid[ego, k]:
@@ -341,6 +348,14 @@ def first_contact(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, ego:
                 and boxes_overlap(mine, box_corners(states[a, k, :2], states[a, k, 2:4], *sizes[a]))]
         if hits:
             return k, int(hits[0])
+    if crash_flagged:
+        last = int(np.flatnonzero(valid[ego])[-1])
+        mine = box_corners(states[ego, last, :2], states[ego, last, 2:4], *sizes[ego])
+        gaps = [(box_gap(mine, box_corners(states[a, last, :2], states[a, last, 2:4], *sizes[a])), int(a))
+                for a in np.flatnonzero(valid[:, last]) if a != ego
+                and np.linalg.norm(states[a, last, :2] - states[ego, last, :2]) < 20.0]
+        if gaps and min(gaps)[0] <= CRASH_FLAG_GAP_M:
+            return last, min(gaps)[1]
     return None
 
 

@@ -186,3 +186,16 @@ def test_the_explanation_says_the_class_and_the_way_out():
     assert f"braking at {-out['avoidance']['accel_mps2']:.0f} m/s²" in text and "valid attack" in text
     assert failure_words(out) == "counts: at fault, avoidable, valid attack"
     assert "not classified" in failure_explanation(unknown_failure())
+
+
+def test_a_crash_flag_without_overlap_finds_the_nearest_box_at_the_last_step():
+    from riskmap.sim.failures import first_contact
+
+    steps = 20
+    t = DT * np.arange(steps)
+    ego = track(20.0 * t, np.zeros(steps))
+    ahead = track(20.0 * t + 5.8, np.zeros(steps))        # 0.8 m gap: highway-env may flag it
+    far = track(20.0 * t + 40.0, np.zeros(steps))
+    states, valid, sizes = scene(ego, ahead, far)
+    assert first_contact(states, valid, sizes, 0) is None
+    assert first_contact(states, valid, sizes, 0, crash_flagged=True) == (steps - 1, 1)
