@@ -286,6 +286,12 @@ TABLE_HEADER = ("| run | valid avoidable at-fault (%, 95% CI) | collision (%, 95
                 "solution % | s/scene |\n|---|---|---|---|---|---|---|---|---|---|---|")
 
 
+# Under every written table: where its columns are defined.
+TABLE_NOTE = ("Columns: valid avoidable at-fault = the failures that count, over every scene; valid, avoidable "
+              "and fault classes count wins (riskmap/sim/failures.py; README, \"Failures that count\"); "
+              "solution % = STRIVE's hindsight check.")
+
+
 def run_attacks(planner_spec: str, scenes_dir: Path, count: int, config: AttackConfig, seed: int,
                 out: Path, traffic: Path, selectors: Path | None, workers: int = 1, resume: bool = False,
                 panels: int = 0, progress: bool = True, batch_size: int = 8) -> dict:
@@ -348,5 +354,5 @@ def run_attacks(planner_spec: str, scenes_dir: Path, count: int, config: AttackC
     write_json(out / "summary.json", summary)
     label = f"{planner_spec} / {config.selector}"
     atomic_write(out / "table.md", lambda f: f.write(
-        (TABLE_HEADER + "\n" + table_row(label, summary["summary"]) + "\n").encode()))
+        (TABLE_HEADER + "\n" + table_row(label, summary["summary"]) + "\n\n" + TABLE_NOTE + "\n").encode()))
     return summary
