@@ -124,7 +124,7 @@ def run_scenario(template: Template, values: np.ndarray, config: EvaluationConfi
     if frames_dir is not None:
         from riskmap.figures.panels import plan_frame_writer
 
-        frames = plan_frame_writer(frames_dir, planner, "episode_000000", f"{ENV_ID} episode 0")
+        frames = plan_frame_writer(frames_dir, planner, "episode_000000", f"{ENV_ID} episode 0", ENV_ID)
     hooks = DriveHooks(setup=setup, on_reset=on_reset, on_ready=tuple(on_ready), perceive=scenario.perceive,
                        on_plan=frames, on_step=log)
     record = drive_episode(env, planner, drive_config, 0, hooks)

@@ -297,10 +297,16 @@ def save_spacetime_strip(plan, grid, path: Path, title: str = "",
     return _save(fig, path)
 
 
-def plan_frame_writer(out_dir: Path, planner, stem: str, label: str):
+def plan_frame_writer(out_dir: Path, planner, stem: str, label: str, env_id: str):
     """A rollout `on_plan` hook (riskmap.sim.rollout.DriveHooks) that writes one PNG per replan,
-    `out_dir/{stem}_tNNNN.png` (NNNN: the control step), titled `{label} t = …`."""
+    `out_dir/{stem}_tNNNN.png` (NNNN: the control step), titled `{label} t = …`. A planner
+    without a raster of its own (constant velocity, a `py:` plug-in) is drawn on a raster of
+    `env_id`'s family extent."""
+    from rasterize.config import FAMILY_EXTENTS, family_of_env
+
+    raster = getattr(planner, "raster", None) or RasterConfig(FAMILY_EXTENTS[family_of_env(env_id)])
+
     def write(run, scene, plan, step: int) -> None:
-        save_plan_png(scene, plan, planner.raster, Path(out_dir) / f"{stem}_t{step:04d}.png",
+        save_plan_png(scene, plan, raster, Path(out_dir) / f"{stem}_t{step:04d}.png",
                       f"{label} t = {run.time_s:.1f} s")
     return write

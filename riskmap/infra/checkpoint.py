@@ -136,3 +136,19 @@ def route_settings_of(sidecar: dict) -> dict | None:
         return None
     return {"speed_limit_mps": float(derived["speed_limit_mps"]),
             "route_accel_mps2": float(derived["route_accel_mps2"])}
+
+
+def sidecar_section(data: dict, name: str, path: Path, build=dict):
+    """`build(**data[name])`: one section of checkpoint `path`'s sidecar, made into its config
+    (`build`, e.g. a frozen config dataclass); a missing or malformed section (an edited or
+    truncated sidecar) is an InputError naming the checkpoint and the section."""
+    section = data.get(name)
+    if not isinstance(section, dict):
+        raise InputError(f"checkpoint {path}: its sidecar {Path(path).with_suffix('.json').name} has no "
+                         f"{name!r} section (edited or truncated); use the .json that training wrote")
+    try:
+        return build(**section)
+    except (TypeError, ValueError) as error:
+        raise InputError(f"checkpoint {path}: the {name!r} section of its sidecar does not fit this "
+                         f"version ({error}); use the .json that training wrote") from None
+

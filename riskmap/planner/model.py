@@ -29,7 +29,7 @@ from torchvision.models import resnet34
 
 from rasterize.config import RasterConfig
 from rasterize.errors import InputError
-from riskmap.infra.checkpoint import load_weights, read_sidecar
+from riskmap.infra.checkpoint import load_weights, read_sidecar, sidecar_section
 from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS
 
 
@@ -211,9 +211,9 @@ def load_model(path: Path, device: str = "cpu") -> tuple[RiskMapGenerator, dict]
     if data.get("planner") == "spacetime":
         raise InputError(f"checkpoint {path} is a space-time planner; this needs a spatial risk-map "
                          "checkpoint (`riskmap train` without --planner spacetime)")
-    model = load_weights(RiskMapGenerator(ModelConfig(**data["model"])), path,
+    model = load_weights(RiskMapGenerator(sidecar_section(data, "model", path, ModelConfig)), path,
                          "it was made by an incompatible version")
     model.to(device)
-    RasterConfig.from_dict(data["raster"])  # validates
+    sidecar_section(data, "raster", path, lambda **d: RasterConfig.from_dict(d))  # validates
     return model, data
 

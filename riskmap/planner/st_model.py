@@ -153,14 +153,14 @@ def load_spacetime_model(path: Path, device: str = "cpu"
     """The trained space-time generator (eval mode) and its sidecar; a spatial checkpoint is an
     InputError naming it."""
     from rasterize.config import RasterConfig
-    from riskmap.infra.checkpoint import load_weights, read_sidecar
+    from riskmap.infra.checkpoint import load_weights, read_sidecar, sidecar_section
 
     side = read_sidecar(Path(path))
     if not is_spacetime(side):
         raise InputError(f"checkpoint {path} is a spatial risk-map planner; this needs a "
                          "space-time one (`riskmap train --planner spacetime`)")
-    model = SpaceTimeRiskMapGenerator(ModelConfig(**side["model"]),
-                                      SpaceTimeConfig(**side["spacetime"]))
+    model = SpaceTimeRiskMapGenerator(sidecar_section(side, "model", path, ModelConfig),
+                                      sidecar_section(side, "spacetime", path, SpaceTimeConfig))
     model = load_weights(model, Path(path), "it was made by an incompatible version")
-    RasterConfig.from_dict(side["raster"])
+    sidecar_section(side, "raster", path, lambda **d: RasterConfig.from_dict(d))
     return model.to(device).eval(), side

@@ -37,6 +37,16 @@ def test_planner_drive_writes_episodes_frames_and_resumes(tmp_path, tiny_checkpo
     assert again["summary"] == first["summary"]
 
 
+def test_frames_of_a_planner_without_a_raster_and_of_one_that_makes_no_plans(tmp_path):
+    config = DriveConfig("highway-v0", episodes=1, seed=0, episode_s=2.0)
+    drive(config, "cv", tmp_path / "cv", frames=True, progress=False)       # drawn on the family's raster
+    record = json.loads((tmp_path / "cv" / "episodes" / "episode_000000.json").read_text())
+    assert len(list((tmp_path / "cv" / "frames").glob("*.png"))) == record["plan_calls"] >= 1
+    with pytest.raises(InputError, match="idm makes none"):
+        drive(config, "idm", tmp_path / "idm", frames=True, progress=False)
+    assert not (tmp_path / "idm").exists()                  # refused before anything is written
+
+
 def test_unknown_spec():
     with pytest.raises(InputError, match="unknown planner spec"):
         make_planner("teleport")

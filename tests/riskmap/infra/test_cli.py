@@ -77,3 +77,28 @@ def test_a_sidecar_of_another_kind_is_named(tmp_path, content, words):
     (tmp_path / "ck.json").write_text(content)
     with pytest.raises(InputError, match=words):
         read_sidecar(tmp_path / "ck")
+
+
+@pytest.mark.parametrize("planner", ["riskmap_highway", "riskmap_st_highway"])
+@pytest.mark.parametrize("damage, words", [("drop", "has no 'model' section"),
+                                           ("extra", "'model' section of its sidecar does not fit")])
+def test_a_sidecar_without_its_model_section_is_one_line_exit_2(tmp_path, capsys, planner, damage, words):
+    import json
+    import shutil
+    from pathlib import Path
+
+    from riskmap.cli import main
+
+    source = Path(__file__).resolve().parents[3] / "checkpoints" / planner
+    shutil.copy(source.with_suffix(".safetensors"), tmp_path / "ck.safetensors")
+    sidecar = json.loads(source.with_suffix(".json").read_text())
+    if damage == "drop":
+        del sidecar["model"]
+    else:
+        sidecar["model"]["wings"] = 2
+    (tmp_path / "ck.json").write_text(json.dumps(sidecar))
+    assert main(["drive", "--checkpoint", str(tmp_path / "ck"), "--env", "highway-v0", "--episodes", "1",
+                 "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert words in err and "\n" not in err
+    assert not (tmp_path / "out").exists()
