@@ -228,7 +228,7 @@ def fine_tune(config: HardenConfig, r: int, shards: list[Path], progress: bool) 
         horizon=trained["horizon"], val_groups=tuple(data["validation_groups"]), seed=config.seed + r,
         init_checkpoint=str(planner_path(config, r - 1)), predict_s=trained.get("predict_s"),
         risk_goal_threshold=config.risk_goal_threshold,
-        timing_head=bool(original["model"].get("timing_head", False)))
+        timing_head=bool(original["model"].get("timing_head", False)), **spacetime_settings(original))
     resume = (here / "train" / "state.pt").exists()
     train(settings, resume=resume, progress=progress)
     last = here / "train" / "last"
@@ -238,6 +238,18 @@ def fine_tune(config: HardenConfig, r: int, shards: list[Path], progress: bool) 
     (here / "planner.safetensors.tmp").replace(here / "planner.safetensors")
     write_json(here / "planner.json", side)
     return {"data": data, "train": side.get("metrics")}
+
+
+def spacetime_settings(original: dict) -> dict:
+    """The TrainConfig fields that make a fine-tune of a space-time planner one too (its steps and
+    reach, from its sidecar); none for a spatial planner."""
+    from riskmap.planner.st_model import is_spacetime
+
+    if not is_spacetime(original):
+        return {}
+    st = original["spacetime"]
+    return {"planner": "spacetime", "steps": st["steps"], "max_forward": st["max_forward"],
+            "max_across": st["max_across"]}
 
 
 def round_sidecar(trained: dict, original: dict, hardening: dict) -> dict:

@@ -1,5 +1,6 @@
-"""The page of a hardening run (RUN/report.html, RUN/report.md): per round, fresh CRASH success on
-held-out scenes with 95% Wilson intervals, natural-traffic metrics, and one attacked scene's risk
+"""The page of a hardening run (RUN/report.html, RUN/report.md): per round, fresh CRASH on held-out
+scenes with 95% Wilson intervals, the failures that count (valid, avoidable, at fault;
+`riskmap.sim.failures`) first and every win beside them, natural-traffic metrics, and one attacked scene's risk
 map planned by the original and by the last round's planner (RUN/report/*.png)."""
 
 from __future__ import annotations
@@ -15,7 +16,8 @@ from riskmap.infra.atomic import atomic_write
 from riskmap.infra.stats import wilson
 
 PANEL_CANDIDATES = 80      # attack windows searched for the before/after panel
-COLUMNS = ("round", "fresh CRASH on held-out scenes [95% CI]", "training attacks won",
+COLUMNS = ("round", "fresh CRASH: valid avoidable at-fault failures [95% CI]", "fresh CRASH: every win [95% CI]",
+           "training attacks won",
            "training search failures", "adversarial windows", "natural collisions", "natural progress (m)",
            "open-loop ADE (m)")
 
@@ -35,7 +37,8 @@ def round_row(entry: dict) -> tuple[str, ...]:
     ade = (judged.get("open_loop") or {}).get("ade_m", {}).get("mean")
     windows = (entry.get("data") or {}).get("attack_windows")      # CRASH's and the search's
     searched = entry.get("training_search") or {}
-    return (str(entry["round"]), _rate(fresh.get("collisions"), fresh.get("scenes")),
+    counted = (fresh.get("failures") or {}).get("counted")     # None: judged before the classification
+    return (str(entry["round"]), _rate(counted, fresh.get("scenes")), _rate(fresh.get("collisions"), fresh.get("scenes")),
             _rate(trained.get("collisions"), trained.get("scenes")) if trained else "–",
             "; ".join(f"{t} {v['collisions']}/{v['evaluations']}" for t, v in sorted(searched.items())) or "–",
             "–" if windows is None else str(windows),
@@ -49,7 +52,7 @@ def before_after(run: Path, rounds: list[dict]) -> list[tuple[str, Path]]:
     from adversary.harden.loop import round_dir
     from riskmap.data.dataset import DemoDataset
     from riskmap.figures.panels import save_plan_panels
-    from riskmap.planner.riskmap_planner import RiskMapPlanner
+    from riskmap.planner.riskmap_planner import load_planner
 
     settings = json.loads((run / "harden.json").read_text())
     last = max(e["round"] for e in rounds)
@@ -62,7 +65,7 @@ def before_after(run: Path, rounds: list[dict]) -> list[tuple[str, Path]]:
         return []
     # The window where the original plans furthest beyond the demonstrated alternative (it
     # would have driven on where the demonstration gives way): where hardening should show.
-    original = RiskMapPlanner.load(Path(settings["checkpoint"]), seed=0)
+    original = load_planner(Path(settings["checkpoint"]), seed=0)
     picks = [adversarial[int(k)] for k in np.unique(np.linspace(0, len(adversarial) - 1,
                                                                  min(PANEL_CANDIDATES, len(adversarial))).astype(int))]
 
@@ -75,7 +78,7 @@ def before_after(run: Path, rounds: list[dict]) -> list[tuple[str, Path]]:
     scene = dataset.scene(window)
     out = []
     for r, checkpoint in ((0, Path(settings["checkpoint"])), (last, round_dir(run, last) / "planner")):
-        planner = original if r == 0 else RiskMapPlanner.load(checkpoint, seed=0)
+        planner = original if r == 0 else load_planner(checkpoint, seed=0)
         plan = planner.plan(scene)
         path = run / "report" / f"before_after_round_{r}.png"
         save_plan_panels(scene, plan, planner.raster, planner.grid, path,

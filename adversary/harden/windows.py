@@ -66,6 +66,10 @@ class HardenWindowConfig:
     # "mildest" departs least from the attacked drive (the first clear in `accels_mps2`' order).
     # experiments/README, "Hardening", has what each did.
     choice: str = "safest"
+    # Learn only from failures that say something about the planner: a valid attack the ego could
+    # have avoided after seeing it (`riskmap.sim.failures`); a record from before the
+    # classification is used as it was.
+    valid_avoidable_only: bool = True
 
     def __post_init__(self) -> None:
         if self.choice not in DEMONSTRATIONS:
@@ -230,6 +234,10 @@ def hardening_windows(record: SceneRecord, attack: dict, planner, planner_spec: 
         return HardenWindows((), {"scene": name, "windows": 0, "why": "no collision"})
     if attack["metrics"].get("collision_before_t0"):
         return HardenWindows((), {"scene": name, "windows": 0, "why": "the ego collided before t0"})
+    failure = attack["metrics"].get("failure")
+    if config.valid_avoidable_only and failure and not (failure.get("valid_attack") and failure["avoidable"]):
+        why = "not a valid attack" if not failure.get("valid_attack") else "unavoidable for a driver who must see it first"
+        return HardenWindows((), {"scene": name, "windows": 0, "why": why})
     ego_full, info = counterfactual_ego(record, attack, planner, planner_spec, config)
     info = {"scene": name, **info}
     if ego_full is None:

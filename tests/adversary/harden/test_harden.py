@@ -156,6 +156,31 @@ def test_no_windows_from_an_attack_without_a_collision(rear_ended):
 
 
 @pytest.mark.slow
+def test_only_valid_avoidable_failures_become_windows(rear_ended):
+    record, attack = rear_ended
+    failure = attack["metrics"]["failure"]
+    assert failure["valid_attack"] and failure["avoidable"]        # the hand-made brake check counts
+    for change, why in (({"valid_attack": False}, "not a valid attack"), ({"avoidable": False}, "unavoidable")):
+        doctored = {**attack, "metrics": {**attack["metrics"], "failure": {**failure, **change}}}
+        made = hardening_windows(record, doctored, cached_planner("replay"), "replay")
+        assert made.scenes == () and why in made.info["why"]
+
+
+def test_a_space_time_planner_is_fine_tuned_as_one():
+    import json
+    from pathlib import Path
+
+    from adversary.harden.loop import spacetime_settings
+
+    root = Path(__file__).resolve().parents[3] / "checkpoints"
+    st = json.loads((root / "riskmap_st_highway.json").read_text())
+    assert spacetime_settings(st) == {"planner": "spacetime", "steps": st["spacetime"]["steps"],
+                                      "max_forward": st["spacetime"]["max_forward"],
+                                      "max_across": st["spacetime"]["max_across"]}
+    assert spacetime_settings(json.loads((root / "riskmap_highway.json").read_text())) == {}
+
+
+@pytest.mark.slow
 def test_round_data_mixes_attack_and_natural_windows_and_keeps_the_original_validation(natural_and_windows,
                                                                                         tmp_path):
     natural, made = natural_and_windows
