@@ -9,6 +9,13 @@ lost, experiments/README "The scenes every planner lost"), each run's class of e
 
     .venv/bin/python experiments/failure_classes.py --runs runs/failures/highway_* \
         --floor 5,10,13,21,24,32,33,34,37 --out experiments/results/failures/highway
+    .venv/bin/python experiments/failure_classes.py --simulator-limits 6 \
+        --out experiments/results/failures/highway_env_limits
+
+Records judged before the highway-env limits existed (every highway scene's attack judged under
+a car's lateral limit) are judged again from the extremes they keep (`revalidated`), so every
+row holds today's definition. `--simulator-limits N`: the kinematic extremes of every vehicle of
+N highway-v0 episodes driven by highway-env's own IDM/MOBIL (the source of HIGHWAY_ENV_LIMITS).
 """
 
 from __future__ import annotations
@@ -18,11 +25,45 @@ import json
 from pathlib import Path
 
 from riskmap.infra.atomic import atomic_write, write_json
-from riskmap.sim.failures import summarise_failures
+from riskmap.sim.failures import HIGHWAY_ENV_LIMITS, revalidated, summarise_failures
 
 
 def load_run(run: Path) -> list[dict]:
-    return [json.loads(p.read_text()) for p in sorted((run / "attacks").glob("scene_*.json"))]
+    """A run's attack records, highway-env scenes' classifications under HIGHWAY_ENV_LIMITS."""
+    records = [json.loads(p.read_text()) for p in sorted((run / "attacks").glob("scene_*.json"))]
+    for r in records:
+        if r.get("metrics") and not r["scene"].get("recording"):
+            r["metrics"]["failure"] = revalidated(r["metrics"].get("failure"), HIGHWAY_ENV_LIMITS)
+    return records
+
+
+def simulator_limits(episodes: int) -> dict:
+    """The extremes of `adversary_kinematics` over every vehicle (longer than 2 s) of `episodes`
+    highway-v0 episodes (seed 3000, 30 s each) that highway-env's IDM/MOBIL drives: p50, p90,
+    p99 and max of each."""
+    import numpy as np
+
+    from riskmap.registry import make_planner
+    from riskmap.sim.episode import make_env
+    from riskmap.sim.failures import adversary_kinematics
+    from riskmap.sim.rollout import DriveConfig, DriveHooks, drive_episode
+
+    env = make_env("highway-v0", 10)
+    values: dict[str, list[float]] = {}
+    for episode in range(episodes):
+        driven = {}
+        drive_episode(env, make_planner("idm", seed=0), DriveConfig("highway-v0", episodes, seed=3000, episode_s=30.0),
+                      episode, hooks=DriveHooks(on_step=lambda run: driven.update(run=run)))
+        states, valid, sizes, _ = driven["run"].recorder.arrays()
+        for agent in range(states.shape[0]):
+            track = states[agent][valid[agent]]
+            if len(track) < 20 or sizes[agent, 0] < 3.0:       # vehicles seen for 2 s or more
+                continue
+            for key, value in adversary_kinematics(track, 0.1, 4.0).items():
+                values.setdefault(key, []).append(value)
+    return {key: {"vehicles": len(v), **{name: float(q) for name, q in
+                                         zip(("p50", "p90", "p99", "max"), np.percentile(v, [50, 90, 99, 100]))}}
+            for key, v in values.items()}
 
 
 def run_row(name: str, records: list[dict]) -> dict:
@@ -51,10 +92,17 @@ def scene_class(record: dict | None) -> str:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--runs", nargs="+", type=Path, required=True)
+    parser.add_argument("--runs", nargs="+", type=Path, default=[])
+    parser.add_argument("--simulator-limits", type=int, default=0, metavar="N",
+                        help="measure highway-env's own drivers over N episodes instead")
     parser.add_argument("--floor", default="", help="comma-separated scene numbers")
     parser.add_argument("--out", type=Path, required=True, help="PREFIX of PREFIX.md and PREFIX.json")
     args = parser.parse_args()
+    if args.simulator_limits:
+        measured = simulator_limits(args.simulator_limits)
+        write_json(args.out.with_suffix(".json"), measured)
+        print(json.dumps(measured, indent=1))
+        return
     runs = {run.name: load_run(run) for run in args.runs if (run / "attacks").is_dir()}
     rows = [run_row(name, records) for name, records in runs.items()]
     lines = ["| run | wins / scenes | valid | avoidable | at fault / struck from behind / side | count | "

@@ -161,7 +161,7 @@ def classify_highway_collision(monitor: EpisodeMonitor, states, valid, sizes) ->
     """`riskmap.sim.failures.classify_failure` of a highway-env episode's collision: lane changes
     on the road network, the attack validated when the partner is its adversary; None when the
     partner was never recorded."""
-    from riskmap.sim.failures import classify_failure
+    from riskmap.sim.failures import HIGHWAY_ENV_LIMITS, classify_failure
     from riskmap.sim.metrics import lane_width_at, on_network
 
     partner = monitor.collision.get("partner_id")
@@ -171,7 +171,7 @@ def classify_highway_collision(monitor: EpisodeMonitor, states, valid, sizes) ->
     return classify_failure(states, valid, sizes, monitor.run.recorder.ego_id, partner, monitor.collision_step,
                             monitor.run.dt, attack=bool(monitor.collision["partner_is_adversary"]),
                             on_road=on_network(road), lane_width_m=lane_width_at(road, monitor.run.ego),
-                            adversary_off_road=monitor.adversary_off_road)
+                            adversary_off_road=monitor.adversary_off_road, limits=HIGHWAY_ENV_LIMITS)
 
 
 def record_of(episode: dict, monitor: EpisodeMonitor, extra: dict, planner=None) -> dict:

@@ -26,7 +26,7 @@ from rasterize.errors import InputError
 from rasterize.frames import box_corners
 from riskmap.registry import cached_planner
 from riskmap.sim.episode import cached_env
-from riskmap.sim.failures import classify_failure
+from riskmap.sim.failures import CAR_LIMITS, HIGHWAY_ENV_LIMITS, classify_failure
 from riskmap.sim.log_replay import HumanLog
 from riskmap.sim.metrics import (
     COLLISION_TYPES,
@@ -436,7 +436,8 @@ def judge(record: SceneRecord, tracks: np.ndarray, rows, adversary_row: int, pla
             lateral_offsets_m=(lane_m, -lane_m), on_road=on_road))
         metrics["failure"] = classify_failure(s, result.valid, result.sizes, ego, adv, k_coll, dt, attack=True,
                                               on_road=on_road, lane_width_m=lane_m,
-                                              adversary_off_road=adv_frac > OFF_ROAD_FRACTION, from_step=k0)
+                                              adversary_off_road=adv_frac > OFF_ROAD_FRACTION, from_step=k0,
+                                              limits=CAR_LIMITS if record.scene.recording else HIGHWAY_ENV_LIMITS)
     elif k_any is not None and with_any is not None:       # the ego hit someone else: a failure too
         lane_m = float(np.median([lane.width_m for lane in record.window.lanes])) if record.window.lanes else 4.0
         metrics["failure"] = classify_failure(result.states, result.valid, result.sizes, ego, int(with_any), k_any,

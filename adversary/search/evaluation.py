@@ -136,7 +136,7 @@ def run_scenario(template: Template, values: np.ndarray, config: EvaluationConfi
 def classify_scenario_collision(run, target) -> dict | None:
     """The class of a driven scenario's first contact (`riskmap.sim.failures`); an attack when the
     ego's partner is the scenario's target, which the search steers."""
-    from riskmap.sim.failures import classify_failure, first_contact
+    from riskmap.sim.failures import HIGHWAY_ENV_LIMITS, classify_failure, first_contact
     from riskmap.sim.metrics import lane_width_at, on_network
 
     states, valid, sizes, _ = run.recorder.arrays()
@@ -148,7 +148,7 @@ def classify_scenario_collision(run, target) -> dict | None:
     road = run.base.road
     return classify_failure(states, valid, sizes, ego, partner, step, run.dt,
                             attack=partner == run.recorder.known_id(target), on_road=on_network(road),
-                            lane_width_m=lane_width_at(road, run.ego))
+                            lane_width_m=lane_width_at(road, run.ego), limits=HIGHWAY_ENV_LIMITS)
 
 
 def evaluate(template: Template, values: np.ndarray, config: EvaluationConfig) -> dict:

@@ -46,7 +46,8 @@ start) until the collision,
   [-MAX_BRAKE_MPS2, MAX_ACCEL_MPS2], |lateral acceleration| = speed * |yaw rate| at most
   MAX_LATERAL_ACCEL_MPS2, |yaw rate| at most MAX_YAW_RATE_RADPS, and sideways motion across the
   direction of travel (the chord over `TRAVEL_CHORD_S`) at most MAX_LANES_PER_S lane widths in
-  any 1 s.
+  any 1 s. In a highway-env world the lateral limit is the simulator's own drivers'
+  (`HIGHWAY_ENV_LIMITS`): its lane changes exceed a car's grip.
 
 A record without the trajectories these need (an older run) is classified "unknown", counted
 as such and never guessed (`UNKNOWN`).
@@ -94,6 +95,27 @@ MAX_YAW_RATE_RADPS = 1.0
 MAX_LANES_PER_S = 1.0
 KINEMATIC_WINDOW_S = 0.5       # accelerations and yaw rates are averages over this long
 TRAVEL_CHORD_S = 4.0           # the direction of travel is the chord over this long (straight roads)
+
+
+@dataclass(frozen=True)
+class KinematicLimits:
+    """The limits a valid adversary keeps (m/s², rad/s, lane widths per second)."""
+
+    max_brake_mps2: float = MAX_BRAKE_MPS2
+    max_accel_mps2: float = MAX_ACCEL_MPS2
+    max_lateral_accel_mps2: float = MAX_LATERAL_ACCEL_MPS2
+    max_yaw_rate_radps: float = MAX_YAW_RATE_RADPS
+    max_lanes_per_s: float = MAX_LANES_PER_S
+
+
+CAR_LIMITS = KinematicLimits()           # a real car's: recorded traffic
+# highway-env's own IDM/MOBIL vehicles change lanes with up to 12.7 m/s² of lateral acceleration
+# (speed * yaw rate, 0.5 s means; p99 12.5) while keeping every other limit (yaw rate at most
+# 0.72 rad/s, 0.83 lanes/s, braking 1.6 m/s²): measured over every vehicle of 6 highway-v0
+# episodes (`experiments/failure_classes.py --simulator-limits`). An attack in a highway-env
+# world is held to what that world's own drivers do where it exceeds a car: its lane changes
+# are the simulator's.
+HIGHWAY_ENV_LIMITS = KinematicLimits(max_lateral_accel_mps2=13.0)
 
 
 @dataclass(frozen=True)
@@ -213,20 +235,32 @@ def adversary_kinematics(track: np.ndarray, dt_s: float, lane_width_m: float) ->
     return out
 
 
-def kinematic_violations(kinematics: dict) -> list[str]:
-    """The limits `adversary_kinematics`' extremes break (names of the module's constants)."""
+def kinematic_violations(kinematics: dict, limits: KinematicLimits = CAR_LIMITS) -> list[str]:
+    """The limits `adversary_kinematics`' extremes break (the names of the module's constants)."""
     broken = []
-    if kinematics["min_accel_mps2"] < -MAX_BRAKE_MPS2:
+    if kinematics["min_accel_mps2"] < -limits.max_brake_mps2:
         broken.append("MAX_BRAKE_MPS2")
-    if kinematics["max_accel_mps2"] > MAX_ACCEL_MPS2:
+    if kinematics["max_accel_mps2"] > limits.max_accel_mps2:
         broken.append("MAX_ACCEL_MPS2")
-    if kinematics["max_lateral_accel_mps2"] > MAX_LATERAL_ACCEL_MPS2:
+    if kinematics["max_lateral_accel_mps2"] > limits.max_lateral_accel_mps2:
         broken.append("MAX_LATERAL_ACCEL_MPS2")
-    if kinematics["max_yaw_rate_radps"] > MAX_YAW_RATE_RADPS:
+    if kinematics["max_yaw_rate_radps"] > limits.max_yaw_rate_radps:
         broken.append("MAX_YAW_RATE_RADPS")
-    if kinematics["max_lanes_per_s"] > MAX_LANES_PER_S:
+    if kinematics["max_lanes_per_s"] > limits.max_lanes_per_s:
         broken.append("MAX_LANES_PER_S")
     return broken
+
+
+def revalidated(failure: dict, limits: KinematicLimits) -> dict:
+    """A stored attack classification judged again under other `limits`, from the extremes it
+    keeps (`kinematics`): whether it is valid and counts, without driving it again."""
+    if failure is None or failure.get("kinematics") is None:
+        return failure
+    reasons = [r for r in failure["invalid_reasons"] if not r.startswith("MAX_")]     # hits, off road
+    reasons += kinematic_violations(failure["kinematics"], limits)
+    valid = not reasons
+    return {**failure, "valid_attack": valid, "invalid_reasons": reasons,
+            "counts": bool(valid and failure["avoidable"] and failure["fault"] == "at fault")}
 
 
 def other_hits(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, agent: int, exclude: int,
@@ -249,7 +283,7 @@ def other_hits(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, agent: 
 
 def attack_validity(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, ego: int, adversary: int,
                     collision_step: int, dt_s: float, lane_width_m: float, off_road: bool | None = None,
-                    from_step: int = 0) -> dict:
+                    from_step: int = 0, limits: KinematicLimits = CAR_LIMITS) -> dict:
     """{"valid", "reasons", "kinematics", "hit_agents"}: whether the adversary caused the
     collision alone, on the road and within the kinematic limits (module docstring); reasons
     name what failed ("hit another agent", "off road", a limit's constant)."""
@@ -258,20 +292,21 @@ def attack_validity(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, eg
     track = states[adversary, span][valid[adversary, span]]
     kinematics = adversary_kinematics(track, dt_s, lane_width_m)
     reasons = (["hit another agent"] if hits else []) + (["off road"] if off_road else []) \
-        + kinematic_violations(kinematics)
+        + kinematic_violations(kinematics, limits)
     return {"valid": not reasons, "reasons": reasons, "kinematics": kinematics, "hit_agents": hits}
 
 
 def classify_failure(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, ego: int, other: int,
                      collision_step: int, dt_s: float, *, attack: bool = False, on_road=None,
                      lane_width_m: float | None = None, adversary_off_road: bool | None = None,
-                     from_step: int = 0) -> dict:
+                     from_step: int = 0, limits: KinematicLimits = CAR_LIMITS) -> dict:
     """The classification of one collision between `ego` and `other` (JSON-ready):
 
     fault, avoidable, visible_time_s / reaction_time_s (times of the record, steps * dt_s),
     avoidance ({"accel_mps2", "offset_m"} of the alternative that avoids it, else None);
     with `attack` (`other` is the adversary) valid_attack and invalid_reasons, kinematics and
     hit_agents; counts: what the headline counts, a valid (attacks), avoidable, at-fault failure.
+    `limits`: the kinematic limits of a valid attack (HIGHWAY_ENV_LIMITS in highway-env worlds).
     """
     fault = collision_fault(states[ego, collision_step], states[other, collision_step])
     avoid = avoidability(states, valid, sizes, ego, other, collision_step, dt_s, on_road, lane_width_m, from_step)
@@ -284,7 +319,7 @@ def classify_failure(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, e
     valid_attack = True
     if attack:
         validity = attack_validity(states, valid, sizes, ego, other, collision_step, dt_s,
-                                   lane_width_m or 3.7, adversary_off_road, from_step)
+                                   lane_width_m or 3.7, adversary_off_road, from_step, limits)
         valid_attack = validity["valid"]
         out.update(valid_attack=valid_attack, invalid_reasons=validity["reasons"],
                    kinematics=validity["kinematics"], hit_agents=validity["hit_agents"])

@@ -199,3 +199,18 @@ def test_a_crash_flag_without_overlap_finds_the_nearest_box_at_the_last_step():
     states, valid, sizes = scene(ego, ahead, far)
     assert first_contact(states, valid, sizes, 0) is None
     assert first_contact(states, valid, sizes, 0, crash_flagged=True) == (steps - 1, 1)
+
+
+def test_a_highway_env_lane_change_is_valid_under_the_simulators_limits_only():
+    from riskmap.sim.failures import CAR_LIMITS, HIGHWAY_ENV_LIMITS, kinematic_violations, revalidated
+
+    kin = {"min_accel_mps2": -2.0, "max_accel_mps2": 1.0, "max_lateral_accel_mps2": 11.0,
+           "max_yaw_rate_radps": 0.6, "max_lanes_per_s": 0.7}          # what highway-env's MOBIL does
+    assert kinematic_violations(kin, CAR_LIMITS) == ["MAX_LATERAL_ACCEL_MPS2"]
+    assert kinematic_violations(kin, HIGHWAY_ENV_LIMITS) == []
+    stored = {"fault": "at fault", "avoidable": True, "valid_attack": False, "counts": False, "kinematics": kin,
+              "invalid_reasons": ["hit another agent", "MAX_LATERAL_ACCEL_MPS2"], "hit_agents": [3]}
+    again = revalidated(stored, HIGHWAY_ENV_LIMITS)
+    assert again["invalid_reasons"] == ["hit another agent"] and not again["valid_attack"]
+    clean = revalidated({**stored, "invalid_reasons": ["MAX_LATERAL_ACCEL_MPS2"]}, HIGHWAY_ENV_LIMITS)
+    assert clean["valid_attack"] and clean["counts"] and clean["invalid_reasons"] == []
