@@ -139,7 +139,7 @@ def _collision_types(records: list[dict]) -> list[dict]:
              "total": sum(counts[p, a].values())} for p, a in sorted(counts)]
 
 
-GUARD_PAIR_METRICS = ("collision_rate", "safety_pct", "distance_m")
+GUARD_PAIR_METRICS = ("failure_rate", "collision_rate", "safety_pct", "distance_m")
 
 
 def _scene_of(record: dict) -> tuple:

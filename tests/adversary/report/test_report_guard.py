@@ -75,6 +75,7 @@ def test_the_unguarded_side_is_cut_to_the_scenes_the_guarded_planner_drove():
     results, _ = report_numbers([highway, intersection, guarded], 0)
     (pair,) = results["guard"]
     assert pair["off"]["collision_rate"]["k"] == 0 and pair["off"]["collision_rate"]["n"] == 1
+    assert pair["off"]["failure_rate"]["n"] == 1 and pair["on"]["failure_rate"]["k"] == 0   # what counts, off and on
     assert pair["identical"] and "never intervened (0 of 10 frames)" in pair["note"]
     # the comparison table still holds both of cv's scenes
     comparison = {(r["planner"], r["attack"]): r for r in results["comparison"]}
