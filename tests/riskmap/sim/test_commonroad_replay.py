@@ -61,11 +61,18 @@ def test_replaying_the_log_recovers_the_recorded_human(traffic):
     assert result["min_gap_m"] > 1.0
 
 
+def _who(result: dict) -> dict:
+    """Whom the ego hit and whether it was ahead (the collision record without its class)."""
+    return {k: result["collision"][k] for k in ("other_id", "other_ahead")}
+
+
 def test_a_planner_that_ignores_the_slowing_leader_collides(traffic):
     # Vehicle 475 slows from 6 to 3 m/s behind a leader; holding 6 m/s runs into it.
     result = replay_commonroad_episode(traffic, 475, ConstantVelocityPlanner())
     assert result["collided"] and result["min_gap_m"] == 0.0
-    assert result["collision"] == {"other_id": 468, "other_ahead": True}
+    assert _who(result) == {"other_id": 468, "other_ahead": True}
+    assert result["collision"]["failure"]["fault"] == "at fault"          # classified (riskmap.sim.failures)
+    assert result["collision"]["failure"]["avoidable"]                    # braking for the leader would do
     assert result["simulated_s"] < 8.0
     assert result["ade_m"] > 1.0
 
@@ -102,7 +109,8 @@ class _StopPlanner:
 def test_replayed_traffic_does_not_react_and_the_report_says_so(traffic):
     # 468 is 475's leader: stopping it gets it struck from behind by the replayed 475.
     result = replay_commonroad_episode(traffic, 468, _StopPlanner())
-    assert result["collided"] and result["collision"] == {"other_id": 475, "other_ahead": False}
+    assert result["collided"] and _who(result) == {"other_id": 475, "other_ahead": False}
+    assert result["collision"]["failure"]["fault"] == "struck from behind"
     assert result["distance_m"] < 0.25 * result["human_distance_m"]      # it braked to a stop
 
 
@@ -186,14 +194,15 @@ def test_reactive_traffic_with_a_planner_that_keeps_up_behaves_as_the_log(traffi
         log = replay_commonroad_episode(traffic, vehicle, make())
         reactive = replay_commonroad_episode(traffic, vehicle, make(),
                                              config=ReplayConfig(mode="reactive"))
-        for key in ("collided", "collision", "min_gap_m", "ade_m", "safety_pct", "simulated_s"):
+        for key in ("collided", "min_gap_m", "ade_m", "safety_pct", "simulated_s"):
             assert reactive[key] == pytest.approx(log[key]), key
+        assert reactive["collision"] == log["collision"]
 
 
 def test_reactive_traffic_brakes_for_a_stopped_ego(traffic):
     # In log mode the replayed 475 runs into 468 stopped ahead of it; reactive, it stops behind.
     log = replay_commonroad_episode(traffic, 468, _StopPlanner())
-    assert log["collision"] == {"other_id": 475, "other_ahead": False}
+    assert _who(log) == {"other_id": 475, "other_ahead": False}
     world = CommonRoadWorld(traffic, 468, config=ReplayConfig(mode="reactive"))
     loop = drive_world(world, _StopPlanner(), LoopConfig(world.n_steps, 5))
     assert not world.crashed and world.collision is None and world.steps == world.n_steps
