@@ -62,7 +62,7 @@ import numpy as np
 from rasterize.frames import box_corners
 from rasterize.geometry import box_gap, boxes_overlap
 from riskmap.sim.alternatives import first_clear_alternative
-from riskmap.sim.metrics import STRIVE, box_iou, overlap_within
+from riskmap.sim.metrics import STRIVE, box_iou, in_frame, overlap_within
 
 FAULTS = ("at fault", "struck from behind", "side")
 UNKNOWN = "unknown"            # the class of a record without trajectories
@@ -132,17 +132,10 @@ class Avoidance:
         return self.accel_mps2 is not None
 
 
-def _frame(state: np.ndarray, point: np.ndarray) -> tuple[float, float]:
-    """(forward, left) of `point` [2] in the frame of `state` (x, y, heading_x, heading_y, ...)."""
-    h = state[2:4] / max(float(np.linalg.norm(state[2:4])), 1e-12)
-    d = np.asarray(point, float) - state[:2]
-    return float(d @ h), float(-d[0] * h[1] + d[1] * h[0])
-
-
 def collision_fault(ego_state: np.ndarray, other_state: np.ndarray) -> str:
     """"at fault", "struck from behind" or "side": where the other's centre lies from the ego's
     heading (module docstring). States [>= 4] world (x, y, heading_x, heading_y, ...)."""
-    forward, left = _frame(ego_state, other_state[:2])
+    forward, left = in_frame(ego_state, other_state[:2])
     bearing = np.degrees(np.arctan2(abs(left), forward))       # 0 straight ahead, 180 behind
     if bearing < AHEAD_DEG:
         return "at fault"

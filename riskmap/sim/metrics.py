@@ -71,7 +71,7 @@ __all__ = [
     "CAMPAIGN_COLLISION_TYPES", "COARSE_COLLISION_NAMES", "COLLISION_TYPES", "STRIVE", "ClosingSafetyConfig",
     "SafetyConfig", "StriveConfig", "ade_m", "box_gap", "box_iou", "box_off_road", "box_polygon",
     "centre_off_lane", "classify_collision", "lane_width_at", "closing_dangerous_encounters", "coarse_collision_name",
-    "coarse_collision_type", "dangerous_encounters", "drivable_area", "goal_error_m", "mean_jerk_mps3",
+    "coarse_collision_type", "dangerous_encounters", "drivable_area", "goal_error_m", "in_frame", "mean_jerk_mps3",
     "min_box_gap", "off_road_fraction", "on_network", "overlap_within", "path_length_m", "safety_pct", "stop_line_crossings",
     "summarise_metric", "vehicle_box",
 ]
@@ -348,7 +348,7 @@ def _wrap(angle):
     return (np.asarray(angle) + np.pi) % (2 * np.pi) - np.pi
 
 
-def _in_frame(ego_state: np.ndarray, point: np.ndarray) -> tuple[float, float]:
+def in_frame(ego_state: np.ndarray, point: np.ndarray) -> tuple[float, float]:
     """(forward, left) of `point` in the frame of `ego_state` (x, y, heading_x, heading_y, ...)."""
     h = ego_state[2:4] / max(np.linalg.norm(ego_state[2:4]), 1e-12)
     d = point - ego_state[:2]
@@ -378,9 +378,9 @@ def classify_collision(ego_track: np.ndarray, adv_track: np.ndarray, ego_size: n
         return "head-on"
     if dpsi >= np.radians(60):
         return "T-bone"
-    forward, lateral = _in_frame(ego, adv[:2])
+    forward, lateral = in_frame(ego, adv[:2])
     half_widths = 0.5 * (float(ego_size[1]) + float(adv_size[1]))
-    if forward > 0 and any(abs(_in_frame(e, a[:2])[1]) >= half_widths
+    if forward > 0 and any(abs(in_frame(e, a[:2])[1]) >= half_widths
                            for e, a in zip(ego_track[:-1], adv_track[:-1])):
         return "cut-in"
     long_pen = 0.5 * (float(ego_size[0]) + float(adv_size[0])) - abs(forward)
