@@ -24,12 +24,11 @@ from pathlib import Path
 
 import numpy as np
 
-from adversary.search.evaluation import classify_scenario_collision
 from riskmap.guard.aggressors import AggressorHook
 from riskmap.infra.atomic import write_json
 from riskmap.infra.stats import wilson
 from riskmap.registry import make_planner
-from riskmap.sim.failures import summarise_failures
+from riskmap.sim.failures import classify_run, summarise_failures
 from riskmap.sim.episode import make_env
 from riskmap.sim.rollout import DriveConfig, DriveHooks, drive_episode
 
@@ -72,7 +71,7 @@ def run_cell(out: Path, env_id: str, scene: str, inner: str, variant: str, episo
         record = drive_episode(env, planner, config, episode,
                                hooks=DriveHooks(on_ready=hooks, on_step=lambda run: driven.update(run=run)))
         if record["collided"] and "run" in driven:       # the collision's class (riskmap.sim.failures)
-            record["failure"] = classify_scenario_collision(driven["run"], hooks[0].aggressor if hooks else None)
+            record["failure"] = classify_run(driven["run"], hooks[0].aggressor if hooks else None)
         guard = getattr(planner, "guard", None)
         record.update({"spec": spec + (f" ({option})" if option else ""), "scene": scene, "variant": variant, "inner": inner,
                        "aggressor": bool(hooks and hooks[0].aggressor is not None)})

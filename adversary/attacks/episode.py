@@ -157,34 +157,20 @@ def job_fields(record: EpisodeRecord) -> dict:
     return fields
 
 
-def classify_highway_collision(monitor: EpisodeMonitor, states, valid, sizes) -> dict | None:
-    """`riskmap.sim.failures.classify_failure` of a highway-env episode's collision: lane changes
-    on the road network, the attack validated when the partner is its adversary; None when the
-    partner was never recorded."""
-    from riskmap.sim.failures import HIGHWAY_ENV_LIMITS, classify_failure
-    from riskmap.sim.metrics import lane_width_at, on_network
-
-    partner = monitor.collision.get("partner_id")
-    if partner is None:
-        return None
-    road = monitor.run.base.road
-    return classify_failure(states, valid, sizes, monitor.run.recorder.ego_id, partner, monitor.collision_step,
-                            monitor.run.dt, attack=bool(monitor.collision["partner_is_adversary"]),
-                            on_road=on_network(road), lane_width_m=lane_width_at(road, monitor.run.ego),
-                            adversary_off_road=monitor.adversary_off_road, limits=HIGHWAY_ENV_LIMITS)
-
-
 def record_of(episode: dict, monitor: EpisodeMonitor, extra: dict, planner=None) -> dict:
     """The job's measurements from one driven episode (`drive_episode`'s record) and its monitor;
     `planner`: what drove it, read right after the drive for its guard's counts (`guard_counts`)."""
     from riskmap.sim.alternatives import ego_only_solution
+    from riskmap.sim.failures import classify_run
 
     solution = failure = None
     if episode["collided"] and monitor.collision_step is not None:
         states, valid, sizes, _ = monitor.run.recorder.arrays()
         ego = monitor.run.recorder.ego_id
         solution = ego_only_solution(states, valid, sizes, ego, monitor.collision_step, monitor.run.dt)
-        failure = classify_highway_collision(monitor, states, valid, sizes)
+        partner = monitor.collision.get("partner_id")
+        failure = None if partner is None else classify_run(
+            monitor.run, monitor.attack.adversary, (monitor.collision_step, partner), monitor.adversary_off_road)
     driven = EpisodeRecord.from_dict(episode)
     return job_fields(replace(driven, extra={
         **monitor.summary(),

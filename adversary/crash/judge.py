@@ -414,6 +414,7 @@ def judge(record: SceneRecord, tracks: np.ndarray, rows, adversary_row: int, pla
         "off_road": bool(result.drive["off_road"]),
     }
     metrics["ego_min_accel_mps2"], metrics["ego_max_abs_accel_mps2"] = _ego_accelerations(result, end)
+    lane_m = float(np.median([lane.width_m for lane in record.window.lanes])) if record.window.lanes else 4.0
     if k_coll is not None:
         s = result.states
         v_ego = s[ego, k_coll, 4] * s[ego, k_coll, 2:4]
@@ -424,7 +425,6 @@ def judge(record: SceneRecord, tracks: np.ndarray, rows, adversary_row: int, pla
         metrics["collision_type"] = classify_collision(s[ego, lo:k_coll + 1][both], s[adv, lo:k_coll + 1][both],
                                                        result.sizes[ego], result.sizes[adv])
         longitudinal = ego_only_solution(s, result.valid, result.sizes, ego, k_coll, dt)
-        lane_m = float(np.median([lane.width_m for lane in record.window.lanes])) if record.window.lanes else 4.0
 
         def on_road(centre, heading, length, width):
             state = np.array([*centre, *heading])
@@ -439,7 +439,6 @@ def judge(record: SceneRecord, tracks: np.ndarray, rows, adversary_row: int, pla
                                               adversary_off_road=adv_frac > OFF_ROAD_FRACTION, from_step=k0,
                                               limits=CAR_LIMITS if record.scene.recording else HIGHWAY_ENV_LIMITS)
     elif k_any is not None and with_any is not None:       # the ego hit someone else: a failure too
-        lane_m = float(np.median([lane.width_m for lane in record.window.lanes])) if record.window.lanes else 4.0
         metrics["failure"] = classify_failure(result.states, result.valid, result.sizes, ego, int(with_any), k_any,
                                               dt, lane_width_m=lane_m, from_step=k0)
     path = result.states[ego, k0:end + 1, :2][result.valid[ego, k0:end + 1]]

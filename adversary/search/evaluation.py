@@ -129,26 +129,10 @@ def run_scenario(template: Template, values: np.ndarray, config: EvaluationConfi
                        on_plan=frames, on_step=log)
     record = drive_episode(env, planner, drive_config, 0, hooks)
     if record["collided"] and "run" in driven:
-        trajectory.failure = classify_scenario_collision(driven["run"], scenario.target)
+        from riskmap.sim.failures import classify_run
+
+        trajectory.failure = classify_run(driven["run"], scenario.target)
     return record, trajectory
-
-
-def classify_scenario_collision(run, target) -> dict | None:
-    """The class of a driven scenario's first contact (`riskmap.sim.failures`); an attack when the
-    ego's partner is the scenario's target, which the search steers."""
-    from riskmap.sim.failures import HIGHWAY_ENV_LIMITS, classify_failure, first_contact
-    from riskmap.sim.metrics import lane_width_at, on_network
-
-    states, valid, sizes, _ = run.recorder.arrays()
-    ego = run.recorder.ego_id
-    contact = first_contact(states, valid, sizes, ego, crash_flagged=True)
-    if contact is None:
-        return None
-    step, partner = contact
-    road = run.base.road
-    return classify_failure(states, valid, sizes, ego, partner, step, run.dt,
-                            attack=partner == run.recorder.known_id(target), on_road=on_network(road),
-                            lane_width_m=lane_width_at(road, run.ego), limits=HIGHWAY_ENV_LIMITS)
 
 
 def evaluate(template: Template, values: np.ndarray, config: EvaluationConfig) -> dict:

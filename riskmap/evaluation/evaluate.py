@@ -173,7 +173,7 @@ def planner_task(config: EvalConfig, out: Path, spec: str, episode: int) -> dict
     from riskmap.sim.plan import requires_log
     from riskmap.sim.rollout import DriveConfig, drive_episode
 
-    from riskmap.sim.failures import classify_failure, first_contact
+    from riskmap.sim.failures import classify_failure, classify_run, first_contact
 
     log = HumanLog.load(_log_path(out, episode))
     human_xy = log.ego_xy()
@@ -201,22 +201,8 @@ def planner_task(config: EvalConfig, out: Path, spec: str, episode: int) -> dict
     states, valid, sizes, _ = run.recorder.arrays()
     metrics = trajectory_metrics(states, valid, sizes, run.recorder.ego_id, run.dt, human_xy,
                                  config.safety)
-    base["failure"] = classify_drive(run, states, valid, sizes) if record["collided"] else None
+    base["failure"] = classify_run(run) if record["collided"] else None
     return _table_record(spec, base, metrics, record["collided"], record["off_road"], record)
-
-
-def classify_drive(run, states, valid, sizes) -> dict | None:
-    """The classification (`riskmap.sim.failures`) of a highway-env drive's first contact, lane
-    changes on its road network; None when the crash flag came without a box overlap in the
-    record (the flag's geometry is highway-env's own)."""
-    from riskmap.sim.failures import classify_failure, first_contact
-    from riskmap.sim.metrics import lane_width_at, on_network
-
-    contact = first_contact(states, valid, sizes, run.recorder.ego_id, crash_flagged=True)
-    if contact is None:
-        return None
-    return classify_failure(states, valid, sizes, run.recorder.ego_id, contact[1], contact[0], run.dt,
-                            on_road=on_network(run.base.road), lane_width_m=lane_width_at(run.base.road, run.ego))
 
 
 def _run_planner_task(config: EvalConfig, out: Path, spec: str, episode: int) -> tuple[str, int, dict]:

@@ -428,3 +428,25 @@ def failure_explanation(failure: dict | None) -> str | None:
                  if failure["valid_attack"] else
                  "; the attack is not valid: " + ", ".join(failure["invalid_reasons"]))
     return text + "."
+
+
+def classify_run(run, adversary=None, contact: tuple[int, int] | None = None,
+                 adversary_off_road: bool | None = None) -> dict | None:
+    """`classify_failure` of a highway-env episode's collision (`riskmap.sim.episode.Episode`:
+    its recorder, road and ego): `contact` (step, recorder agent), else the first box contact
+    (`first_contact`, crash-flagged); an attack when the partner is `adversary` (a highway-env
+    vehicle), held to HIGHWAY_ENV_LIMITS; lane changes on the road network. None when no contact
+    is found."""
+    from riskmap.sim.metrics import lane_width_at, on_network
+
+    states, valid, sizes, _ = run.recorder.arrays()
+    ego = run.recorder.ego_id
+    contact = contact or first_contact(states, valid, sizes, ego, crash_flagged=True)
+    if contact is None:
+        return None
+    step, partner = contact
+    road = run.base.road
+    attack = adversary is not None and partner == run.recorder.known_id(adversary)
+    return classify_failure(states, valid, sizes, ego, partner, step, run.dt, attack=attack,
+                            on_road=on_network(road), lane_width_m=lane_width_at(road, run.ego),
+                            adversary_off_road=adversary_off_road, limits=HIGHWAY_ENV_LIMITS)
