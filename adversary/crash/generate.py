@@ -118,7 +118,6 @@ def off_road_penalty(batch: Batch, traj: torch.Tensor, agents: torch.Tensor) -> 
 
 
 STEP_S = 0.5                          # the decoded tracks' step (2 Hz)
-LANE_WIDTH_M = 3.7                    # lanes-per-second limit in metres per second (US lane width)
 
 
 def kinematic_excess(traj: torch.Tensor) -> torch.Tensor:
@@ -127,8 +126,8 @@ def kinematic_excess(traj: torch.Tensor) -> torch.Tensor:
     acceleration beyond -MAX_BRAKE / +MAX_ACCEL (m/s²), |yaw rate| beyond MAX_YAW_RATE (rad/s),
     |lateral acceleration| = speed * |yaw rate| beyond MAX_LATERAL_ACCEL (m/s²), and speed across
     the track's mean heading beyond MAX_LANES_PER_S lane widths per second (m/s)."""
-    from riskmap.sim.failures import MAX_ACCEL_MPS2, MAX_BRAKE_MPS2, MAX_LANES_PER_S, MAX_LATERAL_ACCEL_MPS2, \
-        MAX_YAW_RATE_RADPS
+    from riskmap.sim.failures import LANE_WIDTH_M, MAX_ACCEL_MPS2, MAX_BRAKE_MPS2, MAX_LANES_PER_S, \
+        MAX_LATERAL_ACCEL_MPS2, MAX_YAW_RATE_RADPS
 
     speed, heading = traj[..., 3], traj[..., 2]
     accel = (speed[..., 1:] - speed[..., :-1]) / STEP_S

@@ -27,7 +27,7 @@ from adversary.report.summary import summary_paragraph
 from rasterize.errors import InputError
 from riskmap.infra.atomic import atomic_write, write_json
 from riskmap.infra.provenance import provenance
-from riskmap.sim.failures import failure_explanation
+from riskmap.sim.failures import failure_explanation, unknown_failure
 from riskmap.sim.record import current_names
 
 _PACKAGES = ("riskmap-toolkit", "numpy", "torch", "highway-env", "gymnasium", "scipy", "matplotlib",
@@ -196,7 +196,7 @@ def _write_job_pages(env, out_dir: Path, records: list[dict], media: dict, galle
             entry = entry and {**entry, "panel": None}     # the gallery's panel is the attack's own
         html = template.render(
             record=record, title=job_title(record), outcome=outcome(current_names(record)),
-            failure_text=(failure_explanation(record.get("failure") or {"fault": "unknown"})
+            failure_text=(failure_explanation(record.get("failure") or unknown_failure())
                           if record.get("collided") else None),
             media=media[job_id], panel=entry and entry["panel"] and f"../{entry['panel']}",
             rank=entry and entry["title"].split(" ", 1)[0], gallery_count=gallery_count,

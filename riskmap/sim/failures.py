@@ -93,6 +93,7 @@ MAX_YAW_RATE_RADPS = 1.0
 # I-80 lane changes: Toledo & Zohar 2007); crossing more than one lane width within 1 s is not
 # a lane change a driver makes.
 MAX_LANES_PER_S = 1.0
+LANE_WIDTH_M = 3.7             # a US lane, where the caller knows no lane width (lanes per second)
 KINEMATIC_WINDOW_S = 0.5       # accelerations and yaw rates are averages over this long
 TRAVEL_CHORD_S = 4.0           # the direction of travel is the chord over this long (straight roads)
 
@@ -312,7 +313,7 @@ def classify_failure(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, e
     valid_attack = True
     if attack:
         validity = attack_validity(states, valid, sizes, ego, other, collision_step, dt_s,
-                                   lane_width_m or 3.7, adversary_off_road, from_step, limits)
+                                   lane_width_m or LANE_WIDTH_M, adversary_off_road, from_step, limits)
         valid_attack = validity["valid"]
         out.update(valid_attack=valid_attack, invalid_reasons=validity["reasons"],
                    kinematics=validity["kinematics"], hit_agents=validity["hit_agents"])
