@@ -8,7 +8,12 @@ planner's also its per-step evidence (predicted footprints and red stop lines fo
 Visitation is read only by figures and open-loop metrics (`svf`), so it is timed apart.
 
     .venv/bin/python experiments/bench_spacetime.py --spatial checkpoints/riskmap_highway \
-        --spacetime checkpoints/riskmap_st_highway [--calls 40] [--threads 2] [--out FILE.json]
+        --spacetime checkpoints/riskmap_st_highway [--also NAME=CHECKPOINT ...] [--calls 40] \
+        [--threads 2] [--out FILE.json]
+
+`--also` adds further planners to the same interleaved rounds (for instance a space-time
+checkpoint trained on a coarser raster, `riskmap train --raster-px 100`); every row's total is
+also given as a ratio to the spatial planner's.
 """
 
 from __future__ import annotations
@@ -32,6 +37,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--spatial", default="checkpoints/riskmap_highway")
     parser.add_argument("--spacetime", default="checkpoints/riskmap_st_highway")
+    parser.add_argument("--also", action="append", default=[], metavar="NAME=CHECKPOINT",
+                        help="another planner to time in the same rounds")
     parser.add_argument("--calls", type=int, default=40)
     parser.add_argument("--warmup", type=int, default=3)
     parser.add_argument("--threads", type=int, default=2)
@@ -42,6 +49,11 @@ def main() -> None:
 
     scenes = highway_scenes(8)
     planners = {"spatial": load_planner(args.spatial), "spacetime": load_planner(args.spacetime)}
+    for entry in args.also:
+        name, sep, path = entry.partition("=")
+        if not sep or not name or not path or name in planners:
+            parser.error(f"--also {entry!r}: give NAME=CHECKPOINT with a new NAME")
+        planners[name] = load_planner(path)
     times = {name: {stage: [] for stage in STAGES} for name in planners}
     for call in range(args.warmup + args.calls):
         scene = scenes[call % len(scenes)]
@@ -56,15 +68,20 @@ def main() -> None:
                 times[name]["svf"].append(svf_s)
     medians = {name: {stage: 1000 * statistics.median(v) for stage, v in stages.items()}
                for name, stages in times.items()}
-    print(f"{'planner':<10} " + " ".join(f"{s + ' ms':>11}" for s in STAGES))
+    width = max(10, *map(len, planners))
+    print(f"{'planner':<{width}} " + " ".join(f"{s + ' ms':>11}" for s in STAGES) + "  raster px")
     for name, row in medians.items():
-        print(f"{name:<10} " + " ".join(f"{row[s]:11.1f}" for s in STAGES))
-    ratio = medians["spacetime"]["total"] / medians["spatial"]["total"]
+        print(f"{name:<{width}} " + " ".join(f"{row[s]:11.1f}" for s in STAGES)
+              + f"  {planners[name].raster.rows:9d}")
+    ratios = {name: row["total"] / medians["spatial"]["total"] for name, row in medians.items()}
+    ratio = ratios["spacetime"]
     print(f"space-time / spatial total: {ratio:.2f}x; value iteration "
           f"{medians['spacetime']['vi']:.1f} vs {medians['spatial']['vi']:.1f} ms")
     if args.out:
         args.out.write_text(json.dumps({
-            "medians_ms": medians, "ratio_total": ratio, "calls": args.calls,
+            "medians_ms": medians, "ratio_total": ratio, "ratios_to_spatial": ratios,
+            "raster_px": {name: planner.raster.rows for name, planner in planners.items()},
+            "calls": args.calls,
             "threads": args.threads, "cpu": platform.processor() or platform.machine(),
             "cores": os.cpu_count(), "torch": torch.__version__}, indent=2) + "\n")
 

@@ -87,8 +87,9 @@ class DemoDataset(_TorchDataset):
 
     `raster`: the raster configuration the caller needs (for instance a checkpoint's); it must
     equal the dataset's, since the extent was chosen with the scenario family at collection,
-    except in `predict_s`: the predicted future is drawn from each window's present, so any
-    horizon can be drawn from any dataset. Samples are drawn with `raster` (else the dataset's).
+    except in `predict_s` and the pixel count: the predicted future is drawn from each window's
+    present and the shards hold states, not pixels, so any horizon and any raster size can be
+    drawn from any dataset. Samples are drawn with `raster` (else the dataset's).
     """
 
     def __init__(self, root: str | Path, resolution: int = 50, raster: RasterConfig | None = None,
@@ -104,7 +105,8 @@ class DemoDataset(_TorchDataset):
             raise InputError(f"dataset {self.root} has format version {version}, this toolkit reads "
                              f"version {FORMAT_VERSION}; collect it again with `riskmap collect`")
         collected = RasterConfig.from_dict(self.manifest["config"]["raster"])
-        if raster is not None and replace(raster, predict_s=collected.predict_s) != collected:
+        if raster is not None and replace(raster, predict_s=collected.predict_s, rows=collected.rows,
+                                          cols=collected.cols) != collected:
             raise InputError(
                 f"dataset {self.root} was collected with raster config {collected} but {raster} "
                 "is required; collect a dataset with the matching extent or use a matching model"

@@ -66,6 +66,8 @@ HELP = {
                    "demonstrations' fastest steps",
     "max_across": "spacetime: cells the ego may move sideways per step (L); default: from the "
                   "demonstrations",
+    "raster_px": "pixels per side of the raster the network reads, over the dataset's extent "
+                 "(default: as collected, 200); the planner then draws the same",
     "predict_s": "draw the other agents' predicted future (constant speed along their lanes) and "
                  "the traffic lights' red over this many seconds as 2 extra raster channels "
                  "(0: none; default: as the dataset was collected, normally none)",
@@ -77,8 +79,8 @@ def add_parsers(sub) -> None:
     add_config_options(p, TrainConfig, "data", "out", "resolution", "uncertainty_weight", "sigma_x",
                        "sigma_y", "goal_variance", "goal", "epochs", "batch_size", "lr", "horizon",
                        "val_groups", "device", "seed", "backbone_weights", "init_checkpoint",
-                       "max_windows", "predict_s", "risk_goal_threshold", "timing_head", "freeze_risk",
-                       "planner", "steps", "max_forward", "max_across", "workers", "cache", help=HELP,
+                       "max_windows", "predict_s", "raster_px", "risk_goal_threshold", "timing_head",
+                       "freeze_risk", "planner", "steps", "max_forward", "max_across", "workers", "cache", help=HELP,
                        option_types=POSITIVE, choices={"planner": PLANNERS})
     p.add_argument("--resume", action="store_true", help="continue an interrupted run exactly")
     p.add_argument("--quiet", action="store_true")

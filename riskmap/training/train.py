@@ -244,12 +244,18 @@ def _sidecar(config: TrainConfig, model_config: ModelConfig, dataset: DemoDatase
     }
 
 
-def raster_for(data: str, predict_s: float | None) -> RasterConfig | None:
-    """The raster a run draws: the dataset's, with `predict_s` seconds of predicted future when
-    given (None: the dataset's own, unchanged)."""
-    if predict_s is None:
+def raster_for(data: str, predict_s: float | None, raster_px: int | None = None) -> RasterConfig | None:
+    """The raster a run draws: the dataset's, with `predict_s` seconds of predicted future and
+    `raster_px` x `raster_px` pixels over the same extent when given (None for both: the
+    dataset's own, unchanged). The shards hold states, not pixels, so any size can be drawn."""
+    if predict_s is None and raster_px is None:
         return None
-    return replace(collected_raster_config(data), predict_s=predict_s)
+    raster = collected_raster_config(data)
+    if predict_s is not None:
+        raster = replace(raster, predict_s=predict_s)
+    if raster_px is not None:
+        raster = replace(raster, rows=raster_px, cols=raster_px)
+    return raster
 
 
 # Settings a resume may change: how long to train, and how samples are made (not what they are).
@@ -310,7 +316,7 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True, on_e
     device = resolve_device(config.device)
     torch.manual_seed(config.seed)
     dataset = DemoDataset(config.data, config.resolution,
-                          raster=raster_for(config.data, config.predict_s),
+                          raster=raster_for(config.data, config.predict_s, config.raster_px),
                           sigma_x=config.sigma_x, sigma_y=config.sigma_y, goal=config.goal)
     dataset.goal_variance = resolve_goal_variance(config.goal_variance, dataset)
     irl = config.irl(dataset.goal_variance)

@@ -20,9 +20,11 @@ def test_the_scale_script_collects_trains_and_writes_checkpoints(tmp_path):
     done = subprocess.run(["bash", str(ROOT / "experiments" / "train_at_scale.sh")], cwd=ROOT,
                           env=env, capture_output=True, text=True, timeout=1200)
     assert done.returncode == 0, done.stderr[-2000:]
-    for name in ("riskmap_st_highway", "riskmap_st_intersection"):
+    for name in ("riskmap_st_highway", "riskmap_st_intersection", "riskmap_st_highway_px100",
+                 "riskmap_st_intersection_px100"):
         planner = load_planner(out / "checkpoints" / name)
         assert isinstance(planner, SpaceTimePlanner)
+        assert planner.raster.rows == (100 if name.endswith("_px100") else 200)
         assert (out / "checkpoints" / f"{name}.log.csv").is_file()
     # resumable: a second run finds everything done and writes the same checkpoints
     again = subprocess.run(["bash", str(ROOT / "experiments" / "train_at_scale.sh")], cwd=ROOT,
@@ -31,3 +33,7 @@ def test_the_scale_script_collects_trains_and_writes_checkpoints(tmp_path):
     bad = subprocess.run(["bash", str(ROOT / "experiments" / "train_at_scale.sh")], cwd=ROOT,
                          env={**env, "SCALE": "huge"}, capture_output=True, text=True)
     assert bad.returncode == 2 and "SCALE" in bad.stderr
+    for name, value in (("DEADLINE_S", "soon"), ("RASTERS", "200 big")):
+        bad = subprocess.run(["bash", str(ROOT / "experiments" / "train_at_scale.sh")], cwd=ROOT,
+                             env={**env, name: value}, capture_output=True, text=True)
+        assert bad.returncode == 2 and name in bad.stderr, bad.stderr

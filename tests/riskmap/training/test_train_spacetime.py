@@ -98,3 +98,25 @@ def test_planning_settings_come_from_the_sidecar_and_bad_ones_are_named(st_check
         copy.with_suffix(".json").write_text(json.dumps(side))
         with pytest.raises(InputError, match="planning"):
             load_planner(copy)
+
+
+def test_a_coarser_raster_is_drawn_from_the_same_dataset_and_planned_with(tiny_dataset,
+                                                                          tiny_checkpoint, tmp_path):
+    """--raster-px: the shards hold states, so the run draws 50 x 50 pixels over the collected
+    extent; the sidecar keeps the size and the planner draws what the network was trained on."""
+    train(tiny_train_config(tiny_dataset, tmp_path / "px", epochs=1, raster_px=50,
+                            init_checkpoint=str(tiny_checkpoint), **ST), progress=False)
+    side = json.loads((tmp_path / "px" / "best.json").read_text())
+    collected = DemoDataset(tiny_dataset).raster_config
+    assert (side["raster"]["rows"], side["raster"]["cols"]) == (50, 50) != (collected.rows, collected.cols)
+    assert side["raster"]["extent"] == collected.to_dict()["extent"]
+    planner = load_planner(tmp_path / "px" / "best", seed=0)
+    assert planner.raster.rows == 50
+    plan = planner.plan(DemoDataset(tiny_dataset).scene(0))
+    assert plan.waypoints.shape == (12, 2) and np.isfinite(plan.waypoints).all()
+
+
+@pytest.mark.parametrize("pixels", [8, 401])
+def test_a_raster_size_out_of_range_is_refused(tiny_dataset, tmp_path, pixels):
+    with pytest.raises(InputError, match="--raster-px must be 16 to 400"):
+        tiny_train_config(tiny_dataset, tmp_path / "x", raster_px=pixels)
