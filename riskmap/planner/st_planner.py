@@ -81,7 +81,13 @@ class SpaceTimePlanner:
     def load(cls, checkpoint: str | Path, seed: int = 0,
              goal_variance: float | None = None) -> SpaceTimePlanner:
         """Goal variance (cells²): `goal_variance`, else the sidecar's `planning.goal_variance`,
-        else the training value."""
+        else the training value.
+
+        A `goal_variance` given here (`--goal-variance` of drive and evaluate) asks to plan
+        towards the goal the scene's route gives (with `evaluate --goal human`, where the human
+        is 6 s ahead) at that variance, as the spatial planner does: it switches the pull towards
+        the route goal on at weight 1 where the sidecar leaves it off, since without the pull
+        the learned goal map ignores the variance and the option would do nothing."""
         model, side = load_spacetime_model(Path(checkpoint))
         variance = goal_variance
         if variance is None:
@@ -98,6 +104,8 @@ class SpaceTimePlanner:
             raise InputError(f"the sidecar's planning.route_goal_weight {weight!r} must be a number "
                              ">= 0; fix or remove it")
         planner.route_goal_weight = float(weight)
+        if goal_variance is not None and planner.route_goal_weight == 0.0:
+            planner.route_goal_weight = 1.0
         settings = side.get("planning", {}).get("time_gap")
         if settings is not None:
             if not isinstance(settings, dict) or set(settings) - {"time_gap_s", "weight"}:

@@ -93,6 +93,30 @@ def test_planning_settings_come_from_the_sidecar_and_bad_ones_are_named(st_check
     copy.with_suffix(".json").write_text(json.dumps(side))
     planner = load_planner(copy)
     assert planner.route_goal_weight == 0.5 and planner.time_gap.weight == 20.0
+    assert load_planner(copy, goal_variance=0.25).route_goal_weight == 0.5   # the sidecar's kept
+
+
+def test_a_given_goal_variance_plans_towards_the_given_goal(st_checkpoint, tiny_dataset):
+    """--goal-variance (as with evaluate --goal human): the pull towards the scene's goal is on,
+    so the plan's terminal visitation sits nearer that goal than without it."""
+    free, given = load_planner(st_checkpoint, seed=1), load_planner(st_checkpoint, seed=1, goal_variance=0.25)
+    assert free.route_goal_weight == 0.0 and given.route_goal_weight == 1.0 and given.goal_variance == 0.25
+    scene = DemoDataset(tiny_dataset).scene(0)
+    distance = []
+    for planner in (free, given):
+        plan = planner.plan(scene)
+        rows, cols = np.indices(plan.svf_steps.shape[1:])
+        last = plan.svf_steps[-1] / plan.svf_steps[-1].sum()
+        distance.append(float((last * np.hypot(rows - plan.goal_cell[0], cols - plan.goal_cell[1])).sum()))
+    assert distance[1] < distance[0]
+
+
+def test_bad_planning_settings_are_named(st_checkpoint, tmp_path):
+    import shutil
+
+    side = json.loads(st_checkpoint.with_suffix(".json").read_text())
+    copy = tmp_path / "ck"
+    shutil.copy(st_checkpoint.with_suffix(".safetensors"), copy.with_suffix(".safetensors"))
     for bad in ({"route_goal_weight": -1}, {"time_gap": {"gap": 1}}):
         side["planning"] = bad
         copy.with_suffix(".json").write_text(json.dumps(side))
