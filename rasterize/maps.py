@@ -75,15 +75,23 @@ def footprint_maps(centres: np.ndarray, headings: np.ndarray, layer: np.ndarray,
     0 … layers − 1, e.g. a time step), all drawn in one pass."""
     centres = np.asarray(centres, float).reshape(-1, 2)
     headings = np.asarray(headings, float).reshape(-1)
-    offsets = _subcell_offsets(grid)                                         # [S, 2]
-    density = np.zeros((layers, grid.rows, grid.cols, offsets.shape[0]))
+    offsets = _subcell_offsets(grid).astype(np.float32)                      # [S, 2]
+    # float32 throughout: the maps are float32 and 1e-7 of a peak of 1 is far below what the
+    # 4-sigma cut below leaves out (e^-8 = 3e-4); the exponentials are most of the time.
+    density = np.zeros((layers, grid.rows, grid.cols, offsets.shape[0]), np.float32)
     if not len(centres):
-        return density.mean(axis=3).astype(np.float32)
-    # Only cells within 4 sigma (plus a cell) of an agent can hold more than e^-8 of it: each
-    # agent is drawn on its own window of the grid, those cells' rows and columns a rectangle.
-    reach = 4.0 * max(sigma_x, sigma_y) + max(grid.row_m, grid.col_m)
-    first = grid_from_ego(centres + [reach, reach], grid)                    # [M, 2] top-left
-    last = grid_from_ego(centres - [reach, reach], grid)                     # bottom-right
+        return density.mean(axis=3)
+    # Only points within 4 sigma of an agent can hold more than e^-8 of it: each agent is drawn on
+    # the cells that hold a sub-sample point inside the bounding box of its 4-sigma ellipse
+    # (half sides 4 sqrt((sy cos h)^2 + (sx sin h)^2) along x and the same with sin/cos swapped
+    # along y, plus a cell), those cells' rows and columns a rectangle. The box follows the
+    # heading, so an agent along the ego's lane takes a third of the columns a square would.
+    cos_h, sin_h = np.cos(headings), np.sin(headings)
+    half = 4.0 * np.stack([np.hypot(sigma_y * cos_h, sigma_x * sin_h),
+                           np.hypot(sigma_y * sin_h, sigma_x * cos_h)], axis=-1)          # [M, 2]
+    half += [grid.row_m, grid.col_m]
+    first = grid_from_ego(centres + half, grid)                              # [M, 2] top-left
+    last = grid_from_ego(centres - half, grid)                               # bottom-right
     # Every agent's Gaussian on a patch of one size (the largest window) at once, so that the
     # exponentials are one array operation; cells outside an agent's own window are left out.
     size = (last - first).max(axis=0) + 1                                    # [2] rows, cols
@@ -91,12 +99,17 @@ def footprint_maps(centres: np.ndarray, headings: np.ndarray, layer: np.ndarray,
     cols = first[:, 1, None] + np.arange(size[1])                            # [M, Q]
     cell_x = ego_from_grid(np.stack([rows, np.zeros_like(rows)], -1), grid)[..., 0]   # [M, P]
     cell_y = ego_from_grid(np.stack([np.zeros_like(cols), cols], -1), grid)[..., 1]   # [M, Q]
-    dx = cell_x[:, :, None, None] + offsets[:, 0] - centres[:, 0, None, None, None]   # [M, P, 1, S]
-    dy = cell_y[:, None, :, None] + offsets[:, 1] - centres[:, 1, None, None, None]   # [M, 1, Q, S]
-    cos, sin = np.cos(headings)[:, None, None, None], np.sin(headings)[:, None, None, None]
-    along = dx * cos + dy * sin
-    across = -dx * sin + dy * cos
-    patches = np.exp(-0.5 * ((along / sigma_y) ** 2 + (across / sigma_x) ** 2))   # [M, P, Q, S]
+    rel_x = (cell_x - centres[:, 0, None]).astype(np.float32)                # [M, P]
+    rel_y = (cell_y - centres[:, 1, None]).astype(np.float32)                # [M, Q]
+    dx = rel_x[:, :, None, None] + offsets[:, 0]                             # [M, P, 1, S]
+    dy = rel_y[:, None, :, None] + offsets[:, 1]                             # [M, 1, Q, S]
+    cos = (cos_h / sigma_y).astype(np.float32)[:, None, None, None]
+    sin = (sin_h / sigma_y).astype(np.float32)[:, None, None, None]
+    cos_x = (cos_h / sigma_x).astype(np.float32)[:, None, None, None]
+    sin_x = (sin_h / sigma_x).astype(np.float32)[:, None, None, None]
+    along = dx * cos + dy * sin                                              # in sigmas
+    across = dy * cos_x - dx * sin_x
+    patches = np.exp(np.float32(-0.5) * (along * along + across * across))  # [M, P, Q, S]
     for m in range(len(centres)):
         r0, c0 = max(first[m, 0], 0), max(first[m, 1], 0)
         r1, c1 = min(last[m, 0], grid.rows - 1), min(last[m, 1], grid.cols - 1)
@@ -105,7 +118,7 @@ def footprint_maps(centres: np.ndarray, headings: np.ndarray, layer: np.ndarray,
         window = density[layer[m], r0:r1 + 1, c0:c1 + 1]
         pr, pc = r0 - first[m, 0], c0 - first[m, 1]
         np.maximum(window, patches[m, pr:pr + r1 - r0 + 1, pc:pc + c1 - c0 + 1], out=window)
-    return density.mean(axis=3).astype(np.float32)
+    return density.mean(axis=3)
 
 
 def goal_map(goal_cell: tuple[int, int], grid: GridConfig, variance: float = 5.0) -> np.ndarray:

@@ -90,3 +90,35 @@ def test_a_short_recording_is_one_clear_error():
         demo_cells_per_step(crossing_scene(steps=4), UNIT_GRID, 12, 0.5)
     with pytest.raises(InputError, match="does not divide"):
         future_footprints(crossing_scene(dt=0.4), UNIT_GRID, 2, 0.5)
+
+
+@pytest.mark.parametrize("extent_rows_cols", [((40.0, 8.0, 6.0, 6.0), 10, 15),     # long cells
+                                              ((10.0, 10.0, 10.0, 10.0), 20, 20)])  # square
+def test_footprint_maps_match_a_float64_reference_without_a_cut(extent_rows_cols):
+    """Every sub-sample point of every cell against every agent, in float64 and with no 4-sigma
+    window: the drawn maps differ only by what lies beyond 4 sigma (at most e^-8) and rounding."""
+    from rasterize.config import Extent, GridConfig
+    from rasterize.frames import ego_from_grid
+    from rasterize.maps import _subcell_offsets, footprint_maps
+
+    (front, back, left, right), rows, cols = extent_rows_cols
+    grid = GridConfig(Extent(front, back, left, right), rows, cols)
+    rng = np.random.default_rng(3)
+    centres = np.column_stack([rng.uniform(-back - 5, front + 5, 14), rng.uniform(-right - 3, left + 3, 14)])
+    headings = rng.uniform(-np.pi, np.pi, 14)
+    layer = rng.integers(0, 3, 14)
+    sigma_x, sigma_y = 0.5, 1.5
+    drawn = footprint_maps(centres, headings, layer, 3, grid, sigma_x, sigma_y)
+    cells = ego_from_grid(np.stack(np.indices((rows, cols)), -1), grid)                 # [R, C, 2]
+    points = cells[:, :, None, :] + _subcell_offsets(grid)                               # [R, C, S, 2]
+    expected = np.zeros((3, rows, cols))
+    for t in range(3):
+        best = np.zeros(points.shape[:3])
+        for (x, y), h in zip(centres[layer == t], headings[layer == t]):
+            dx, dy = points[..., 0] - x, points[..., 1] - y
+            along, across = dx * np.cos(h) + dy * np.sin(h), -dx * np.sin(h) + dy * np.cos(h)
+            best = np.maximum(best, np.exp(-0.5 * ((along / sigma_y) ** 2 + (across / sigma_x) ** 2)))
+        expected[t] = best.mean(axis=2)
+    assert drawn.dtype == np.float32 and drawn.shape == (3, rows, cols)
+    assert expected.max() > 0.2                       # the agents are on the grid
+    np.testing.assert_allclose(drawn, expected, rtol=0, atol=np.exp(-8.0) + 1e-6)
