@@ -63,6 +63,7 @@ from rasterize.config import Extent
 from rasterize.errors import InputError
 from rasterize.highway import RouteRule
 from rasterize.scene import STATE_DIM, AgentKind, Lane, LineType, Scene, Signal
+from rasterize.timebase import FUTURE_S, HISTORY_S, PLAN_DT_S
 
 log = logging.getLogger(__name__)
 
@@ -74,9 +75,9 @@ VEHICLE_TYPES = ("car", "truck", "bus", "motorcycle", "taxi", "priorityVehicle")
 class CommonRoadSceneConfig:
     """How a Scene is cut from a recording. Seconds, metres, metres/second."""
 
-    history_s: float = 2.0
-    future_s: float = 6.0
-    dt_s: float = 0.5                 # the toolkit's window rate (2 Hz)
+    history_s: float = HISTORY_S
+    future_s: float = FUTURE_S
+    dt_s: float = PLAN_DT_S           # the toolkit's window rate (2 Hz)
     radius_m: float = 120.0           # agents farther than this from the ego are left out
     max_agents: int = 32              # the ego included
     lane_radius_m: float = 260.0      # lanelets whose centre line comes this close are kept

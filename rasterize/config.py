@@ -12,6 +12,7 @@ import numbers
 from dataclasses import asdict, dataclass
 
 from rasterize.errors import InputError
+from rasterize.timebase import HISTORY_S
 
 
 @dataclass(frozen=True)
@@ -92,7 +93,7 @@ class RasterConfig(_Division):
 
     rows: int = 200
     cols: int = 200
-    history_s: float = 2.0
+    history_s: float = HISTORY_S
     predict_s: float = 0.0
 
     def __post_init__(self) -> None:

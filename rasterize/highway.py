@@ -17,6 +17,7 @@ import numpy as np
 from rasterize.errors import InputError
 from rasterize.frames import heading_from_highway_env, world_from_highway_env
 from rasterize.scene import STATE_DIM, AgentKind, Lane, LineType, Scene
+from rasterize.timebase import FUTURE_S, HISTORY_S, PLAN_DT_S
 
 
 @dataclass(frozen=True)
@@ -138,7 +139,7 @@ class RouteRule:
     information only; used alike for training goal maps and in closed loop.
     """
 
-    horizon_s: float = 6.0
+    horizon_s: float = FUTURE_S
     accel_mps2: float = 1.0
     standstill_gap_m: float = 5.0
     headway_s: float = 1.5
@@ -391,8 +392,8 @@ class TrafficRecorder:
                            np.asarray(self._kinds, dtype=np.int8))
         return self._cache
 
-    def scene(self, step: int, history_s: float = 2.0, future_s: float = 6.0, dt_s: float = 0.5,
-              radius_m: float = 120.0, max_agents: int = 32, lanes: bool = True,
+    def scene(self, step: int, history_s: float = HISTORY_S, future_s: float = FUTURE_S,
+              dt_s: float = PLAN_DT_S, radius_m: float = 120.0, max_agents: int = 32, lanes: bool = True,
               sampling: LaneSampling = LaneSampling(), source: str = "") -> Scene:
         """The scene at recorded `step`, resampled every `dt_s` (a multiple of the record's dt).
 
@@ -434,8 +435,8 @@ class TrafficRecorder:
         return route
 
 
-def scene_from_highway_env(env, history_s: float = 2.0, future_s: float = 0.0, *,
-                           recorder: TrafficRecorder | None = None, dt_s: float = 0.5,
+def scene_from_highway_env(env, history_s: float = HISTORY_S, future_s: float = 0.0, *,
+                           recorder: TrafficRecorder | None = None, dt_s: float = PLAN_DT_S,
                            radius_m: float = 120.0, max_agents: int = 32,
                            sampling: LaneSampling = LaneSampling()) -> Scene:
     """The scene of a live highway-env env now, in the toolkit's world frame.

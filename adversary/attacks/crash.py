@@ -54,6 +54,7 @@ from adversary.attacks.episode import (
 )
 from adversary.attacks.recorded import job_family, scene_record
 from rasterize.errors import InputError
+from rasterize.timebase import HISTORY_S, PLAN_DT_S
 from riskmap.infra.config_mapping import require
 from riskmap.registry import cached_planner
 from riskmap.sim.metrics import coarse_collision_name
@@ -64,8 +65,8 @@ from riskmap.sim.record import EpisodeRecord, current_names
 # import torch; tests/adversary/test_crash_attack.py checks the two agree.
 SELECTORS = ("crash", "crash-no-mam", "distance", "distance+mam", "nearest", "random")
 LEARNED_SELECTORS = ("crash", "crash-no-mam")
-HISTORY_S = 2.0                    # the traffic model's history (adversary.crash.scenes.HISTORY_S)
-WINDOW_DT_S = 0.5                  # its step
+# HISTORY_S (rasterize.timebase, 2 s): the traffic model's history (adversary.crash.scenes.HISTORY_S)
+WINDOW_DT_S = PLAN_DT_S            # its step (0.5 s)
 
 
 @dataclass(frozen=True)

@@ -47,9 +47,10 @@ from adversary.attacks.registry import parse_attack_params
 from adversary.campaign.job import Budget, Job
 from rasterize.config import family_of_env
 from rasterize.errors import InputError
+from rasterize.timebase import HISTORY_S, PLAN_DT_S
 from riskmap.infra.config_mapping import from_mapping, require, to_plain
 
-T0_STEP_S, T0_MIN_S = 0.5, 2.0       # a recorded scene's attack time: the window's grid and history
+T0_STEP_S, T0_MIN_S = PLAN_DT_S, HISTORY_S   # a recorded scene's attack time: the window's grid and history
 _ENV_ONLY, _RECORDED_ONLY = ("seed",), ("commonroad", "family", "t0")
 
 

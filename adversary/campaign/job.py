@@ -26,14 +26,15 @@ from adversary.attacks.monitor import SafetyConfig
 from adversary.attacks.recorded import RecordedScene
 from adversary.attacks.registry import attack_entry
 from rasterize.errors import InputError
+from rasterize.timebase import CONTROL_HZ, REPLAN_HZ
 from riskmap.infra.config_mapping import to_plain
 
 
 @dataclass(frozen=True)
 class Budget:
     episode_s: float | None = None    # simulated seconds per episode; None: the family's default
-    control_hz: int = 10              # simulation and control rate
-    replan_hz: int = 2
+    control_hz: int = CONTROL_HZ      # simulation and control rate
+    replan_hz: int = REPLAN_HZ
 
 
 @dataclass(frozen=True)

@@ -36,6 +36,7 @@ from adversary.crash.selection import (
 )
 from adversary.crash.traffic_model import states_of
 from rasterize.errors import InputError
+from rasterize.timebase import REPLAN_HZ
 from riskmap.sim.rollout import check_replan_hz
 
 
@@ -50,7 +51,7 @@ VALIDITY_KINEMATIC_WEIGHT = 5.0
 class AttackConfig:
     selector: str = "crash"
     replan_every: int = 20              # k (closed-loop planners)
-    replan_hz: int = 2                  # how often the ego under test replans in every drive (Hz,
+    replan_hz: int = REPLAN_HZ          # how often the ego under test replans in every drive (Hz,
                                         # a divisor of the 10 Hz control rate; 2 is the planner
                                         # paper's step and every drive's default)
     iterations_replay: int = 300        # CRASH / STRIVE

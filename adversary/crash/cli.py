@@ -8,6 +8,7 @@ import json
 from pathlib import Path
 
 from adversary.crash.config import TrainSelectorConfig, TrainTrafficConfig
+from rasterize.timebase import REPLAN_HZ
 from riskmap.infra.cli import (
     add_config_options,
     config_from_args,
@@ -188,7 +189,7 @@ def add_attack_parsers(subparsers) -> None:
     p.add_argument("--selector-model", default=None,
                    help="directory with selector_mam / selector_no_mam (default: checkpoints/crash_selector_<family>)")
     p.add_argument("--replan-every", type=positive_int, default=20, help="k: planner re-runs every k iterations")
-    p.add_argument("--replan-hz", type=positive_int, default=2,
+    p.add_argument("--replan-hz", type=positive_int, default=REPLAN_HZ,
                    help="how often the ego under test replans in its drives (Hz; 1, 2, 5 or 10; default 2)")
     p.add_argument("--iterations", type=non_negative_int, default=0,
                    help="0: 300 for replay, 200 for a closed-loop planner")

@@ -30,10 +30,11 @@ from scipy.ndimage import distance_transform_edt
 from rasterize.errors import InputError
 from rasterize.frames import ego_from_world, heading_angle
 from rasterize.scene import Scene
+from rasterize.timebase import HISTORY_S, PLAN_DT_S, PLAN_STEPS
 
-PAST_STEPS = 5      # 2 s of history at 2 Hz, the current step included
-FUTURE_STEPS = 12   # 6 s at 2 Hz
-STEP_S = 0.5
+PAST_STEPS = round(HISTORY_S / PLAN_DT_S) + 1   # 5: 2 s of history at 2 Hz, the current step included
+FUTURE_STEPS = PLAN_STEPS                       # 12: 6 s at 2 Hz
+STEP_S = PLAN_DT_S                              # 0.5 s
 
 
 @dataclass(frozen=True)

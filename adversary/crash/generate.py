@@ -38,6 +38,7 @@ import torch
 from adversary.crash.batch import Batch, sample_field
 from adversary.crash.traffic_model import Encoded, TrafficModel, log_normal
 from rasterize.frames import box_corners
+from rasterize.timebase import PLAN_DT_S
 
 DISTANCE_EPS_M = 1e-6
 TIME_WEIGHTINGS = ("sum", "softmin")
@@ -117,7 +118,7 @@ def off_road_penalty(batch: Batch, traj: torch.Tensor, agents: torch.Tensor) -> 
     return (per_agent * w).sum(-1) / w.sum(-1).clamp(min=1.0)
 
 
-STEP_S = 0.5                          # the decoded tracks' step (2 Hz)
+STEP_S = PLAN_DT_S                    # the decoded tracks' step (0.5 s, 2 Hz)
 
 
 def kinematic_excess(traj: torch.Tensor) -> torch.Tensor:

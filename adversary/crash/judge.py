@@ -24,6 +24,7 @@ from adversary.crash.scenes import CONTROL_HZ, WINDOW_DT_S, SceneRecord
 from riskmap.sim.alternatives import ego_only_solution
 from rasterize.errors import InputError
 from rasterize.frames import box_corners
+from rasterize.timebase import FUTURE_S, HISTORY_S, REPLAN_HZ
 from riskmap.registry import cached_planner
 from riskmap.sim.episode import cached_env
 from riskmap.sim.failures import CAR_LIMITS, HIGHWAY_ENV_LIMITS, classify_failure
@@ -42,7 +43,7 @@ from riskmap.sim.metrics import (
 COLLISION_IOU = STRIVE.collision_iou            # a collision is a box IoU above this
 OFF_ROAD_FRACTION = STRIVE.off_road_fraction    # off-road when more than this share of the box is off
 # Training windows cut from a drive (`rollout`'s scene_steps): `riskmap collect`'s defaults.
-WINDOW_HISTORY_S, WINDOW_FUTURE_S = 2.0, 6.0
+WINDOW_HISTORY_S, WINDOW_FUTURE_S = HISTORY_S, FUTURE_S
 ACCEL_WINDOW_S = 2.0            # ego acceleration is measured over this long before the collision
 CUT_IN_LOOKBACK_S = 3.0         # a cut-in adversary was beside the ego within this long before
 GAP_RADIUS_M = 40.0             # others farther (centre distance) do not count for the min gap
@@ -161,7 +162,7 @@ def with_ego_states(log: HumanLog, ego_states: np.ndarray) -> HumanLog:
 
 
 def rollout(record: SceneRecord, tracks: np.ndarray, rows, planner, planner_spec: str,
-            control_hz: int = CONTROL_HZ, replan_hz: int = 2, keep_scene: bool = False,
+            control_hz: int = CONTROL_HZ, replan_hz: int = REPLAN_HZ, keep_scene: bool = False,
             ego_states: np.ndarray | None = None, scene_steps: tuple[int, ...] = ()) -> Rollout:
     """Drive `planner` (made from `planner_spec`) against the log spliced with `tracks` at `rows`
     (module docstring). Empty `rows` (tracks [0, F, 6]) drives against the untouched record.

@@ -56,12 +56,13 @@ from rasterize.commonroad import (
 from rasterize.errors import InputError
 from rasterize.frames import highway_env_from_world
 from rasterize.scene import Scene
+from rasterize.timebase import CONTROL_HZ, REPLAN_HZ
 from riskmap.data.collect_commonroad import CommonRoadCollectConfig
 from riskmap.sim.commonroad_replay import CommonRoadWorld, ReplayConfig, road_from_lanelets
 from riskmap.sim.log_replay import HumanLog
 from riskmap.sim.metrics import centre_off_lane
 
-LOG_DT_S = 0.1                 # the log's step (10 Hz, the control rate)
+LOG_DT_S = 1 / CONTROL_HZ      # the log's step (0.1 s: 10 Hz, the control rate)
 # Tracks are smoothed as `riskmap collect --from-commonroad` smooths them (NGSIM positions jump).
 SMOOTHING_S = next(f.default for f in fields(CommonRoadCollectConfig) if f.name == "smoothing_s")
 # File-name prefixes of the recorded sites and their traffic-model family.
@@ -354,8 +355,9 @@ def _scene_at(traffic: RecordedTraffic, states: np.ndarray, valid: np.ndarray, e
                  source=source, time_s=k * dt_s, route_xy=route)
 
 
-def rollout_recorded(record: SceneRecord, log: HumanLog, planner, planner_spec: str, control_hz: int = 10,
-                     replan_hz: int = 2, keep_scene: bool = False, scene_steps: tuple[int, ...] = ()) -> dict:
+def rollout_recorded(record: SceneRecord, log: HumanLog, planner, planner_spec: str,
+                     control_hz: int = CONTROL_HZ, replan_hz: int = REPLAN_HZ, keep_scene: bool = False,
+                     scene_steps: tuple[int, ...] = ()) -> dict:
     """`adversary.crash.judge.rollout` on a recorded scene, against `log` (the spliced record), as
     the module docstring says: the fields of its `Rollout` but the wall time, with the highway
     path's contract (recorder ids are log agents). `scene_steps`' windows are routed as `planner`

@@ -27,6 +27,7 @@ import numpy as np
 
 from adversary.crash.attack import AttackConfig, attack_records, load_models
 from rasterize.errors import InputError
+from rasterize.timebase import CONTROL_HZ
 from riskmap.infra.atomic import atomic_write, write_json
 from riskmap.infra.parallel import run_parallel
 from riskmap.infra.provenance import provenance
@@ -49,7 +50,7 @@ def record_scenes(env_id: str, seed: int, count: int, out: Path, first_episode: 
     # --out exists: inside the loop they would only skip one episode after another, forever.
     if seed < 0 or first_episode < 0:
         raise InputError(f"--seed {seed} and --first-episode {first_episode} must be 0 or more")
-    AttackScene(env_id, seed, first_episode, t0_s, static_agents=static_agents).check(control_hz=10)
+    AttackScene(env_id, seed, first_episode, t0_s, static_agents=static_agents).check(control_hz=CONTROL_HZ)
     refuse_unless_resume(out, "scenes", None, resume)
     # The index is the commit point: a scene counts once the index lists it. A run killed before
     # its first index write left scene files but no index; resuming it starts afresh over them.
@@ -102,7 +103,7 @@ def record_commonroad_scenes(inputs: list[str | Path], count: int, out: Path, t0
 
     out = Path(out)
     index_path = out / INDEX
-    AttackScene(RECORDED_ENV, 0, 0, t0_s, recording="check", ego_id=0).check(control_hz=10)
+    AttackScene(RECORDED_ENV, 0, 0, t0_s, recording="check", ego_id=0).check(control_hz=CONTROL_HZ)
     refuse_unless_resume(out, "scenes", None, resume)
     files, family, dropped = sweep_files(scenario_files(inputs, flag="--commonroad"), family)
     settings = {"env_id": RECORDED_ENV, "family": family, "t0_s": t0_s, "smoothing_s": SMOOTHING_S,

@@ -20,14 +20,15 @@ import numpy as np
 from rasterize.config import family_of_env
 from rasterize.errors import InputError
 from rasterize.scene import Lane, LineType, Scene
+from rasterize.timebase import CONTROL_HZ, FUTURE_S, HISTORY_S, PLAN_DT_S
 from riskmap.infra.atomic import write_json, write_npz
 from riskmap.sim.episode import cached_env
 from riskmap.sim.log_replay import HumanLog
 from riskmap.sim.static_agents import MAX_STATIC_AGENTS, STATIC_FAMILIES
 
-WINDOW_DT_S = 0.5          # the traffic model's step (2 Hz)
-CONTROL_HZ = 10            # the recorded logs' rate, and every attack drive's control rate
-HISTORY_S = 2.0            # past the window shows (4 steps before the current one)
+WINDOW_DT_S = PLAN_DT_S    # the traffic model's step (2 Hz)
+# CONTROL_HZ (rasterize.timebase, 10): the recorded logs' rate, and every attack drive's control rate.
+# HISTORY_S (rasterize.timebase, 2 s): past the window shows (4 steps before the current one).
 RECORDED_ENV = "commonroad"  # env_id of a scene cut from a CommonRoad recording (adversary.crash.recorded)
 
 @dataclass(frozen=True)
@@ -38,7 +39,7 @@ class AttackScene:
     scene_seed: int
     episode: int
     t0_s: float = 2.0          # attack time; at least HISTORY_S so the window has its history
-    horizon_s: float = 6.0     # generated future after t0 (12 steps at 2 Hz)
+    horizon_s: float = FUTURE_S  # generated future after t0 (12 steps at 2 Hz)
     static_agents: int = 0     # parked / stopped vehicles added to the simulated episode
     recording: str = ""        # a CommonRoad recording (.xml) instead of a highway-env episode:
     ego_id: int = -1           # then the recorded vehicle attacked as the ego (its obstacle id)

@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from adversary.crash.judge import WINDOW_FUTURE_S, WINDOW_HISTORY_S, _no_contact_response
-from adversary.crash.scenes import WINDOW_DT_S
+from adversary.crash.scenes import CONTROL_HZ, WINDOW_DT_S
 from adversary.harden.windows import (
     NO_HISTORY,
     HardenWindowConfig,
@@ -34,8 +34,6 @@ from adversary.harden.windows import (
     with_demonstrated_future,
 )
 from riskmap.sim.log_replay import HumanLog, ReplayPlanner
-
-CONTROL_HZ = 10
 
 
 def _drive(search_config: dict, values: np.ndarray, wrap_planner=None):

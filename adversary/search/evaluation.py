@@ -24,6 +24,7 @@ from adversary.search.objectives import (
 )
 from adversary.search.scenarios import ENV_ID, Scenario, Template
 from rasterize.frames import world_from_highway_env
+from rasterize.timebase import CONTROL_HZ
 
 MAX_SPEED_MPS = 40.0                 # highway-env's vehicle speed cap
 
@@ -34,7 +35,7 @@ class EvaluationConfig:
     template: str
     seed: int = 0                    # planner sampling and perception noise
     episode_s: float = 10.0          # simulated seconds per evaluation
-    control_hz: int = 10
+    control_hz: int = CONTROL_HZ
 
     @property
     def steps(self) -> int:

@@ -23,6 +23,7 @@ import numpy as np
 from rasterize.config import FAMILY_EXTENTS, RasterConfig, family_of_env
 from rasterize.errors import InputError
 from rasterize.scene_io import pack_scenes
+from rasterize.timebase import CONTROL_HZ, FUTURE_S, HISTORY_S, PLAN_DT_S
 from riskmap.infra.atomic import write_json, write_npz
 from riskmap.infra.parallel import run_parallel
 from riskmap.infra.provenance import provenance
@@ -44,10 +45,10 @@ class CollectConfig:
     env_id: str
     episodes: int
     seed: int = 0
-    record_hz: int = 10
-    history_s: float = 2.0
-    future_s: float = 6.0
-    window_dt_s: float = 0.5
+    record_hz: int = CONTROL_HZ
+    history_s: float = HISTORY_S
+    future_s: float = FUTURE_S
+    window_dt_s: float = PLAN_DT_S
     window_stride_s: float = 1.0
     crash_margin_s: float = 2.0        # drop windows whose future ends this close to an ego crash
     scene_radius_m: float = 120.0

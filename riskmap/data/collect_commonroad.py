@@ -59,6 +59,7 @@ from rasterize.config import FAMILY_EXTENTS, Extent, RasterConfig
 from rasterize.errors import InputError
 from rasterize.frames import ego_from_world, ego_pose
 from rasterize.highway import RouteRule
+from rasterize.timebase import FUTURE_S, HISTORY_S, PLAN_DT_S
 from riskmap.data.collect import (
     FORMAT_VERSION,
     MANIFEST,
@@ -95,9 +96,9 @@ class CommonRoadCollectConfig:
     """
 
     files: tuple[tuple[str, str], ...]
-    history_s: float = 2.0
-    future_s: float = 6.0
-    window_dt_s: float = 0.5
+    history_s: float = HISTORY_S
+    future_s: float = FUTURE_S
+    window_dt_s: float = PLAN_DT_S
     window_stride_s: float = 1.0
     scene_radius_m: float = 120.0
     max_agents: int = 32

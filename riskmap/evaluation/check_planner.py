@@ -17,10 +17,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from rasterize.timebase import REPLAN_HZ
 from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, Plan
 
 FAMILY_ENVS = ("highway-v0", "merge-v0", "roundabout-v0", "intersection-v0")
-REPLAN_PERIOD_S = 0.5        # the rollout replans at 2 Hz
+REPLAN_PERIOD_S = 1 / REPLAN_HZ   # the rollout replans at 2 Hz (0.5 s)
 MAX_SPEED_MS = 60.0          # faster than any road vehicle here: the waypoints are not metres
 MAX_ACCEL_MS2 = 10.0         # beyond hard braking: the first waypoint does not start at the ego
 KMH_PER_MS = 3.6

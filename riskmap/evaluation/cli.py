@@ -7,6 +7,7 @@ import math
 from pathlib import Path
 
 from rasterize.errors import InputError
+from rasterize.timebase import REPLAN_HZ
 from riskmap.infra.cli import comma_list, positive_float, positive_int
 
 
@@ -153,7 +154,7 @@ def add_parsers(sub) -> None:
                         "(with --commonroad: the recorded paths, braking for the ego)")
     p.add_argument("--episode-s", type=float, default=None,
                    help="simulated seconds per episode (default: the family's length)")
-    p.add_argument("--replan-hz", type=positive_int, default=2,
+    p.add_argument("--replan-hz", type=positive_int, default=REPLAN_HZ,
                    help="how often planners replan (Hz; a divisor of the 10 Hz control rate; default 2)")
     p.add_argument("--out", required=True)
     p.add_argument("--workers", type=positive_int, default=1, help="processes (default 1)")

@@ -27,6 +27,7 @@ import numpy as np
 
 from rasterize.config import family_of_env
 from rasterize.errors import InputError
+from rasterize.timebase import CONTROL_HZ, REPLAN_HZ
 from riskmap.infra.atomic import atomic_write, write_json
 from riskmap.infra.parallel import run_parallel
 from riskmap.infra.provenance import provenance
@@ -65,8 +66,8 @@ class EvalConfig:
     episodes: int
     seed: int = 0
     mode: str = "log"
-    control_hz: int = 10
-    replan_hz: int = 2
+    control_hz: int = CONTROL_HZ
+    replan_hz: int = REPLAN_HZ
     episode_s: float | None = None        # default: the family's episode length
     safety: SafetyConfig = field(default_factory=SafetyConfig)
 

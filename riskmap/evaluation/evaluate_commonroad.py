@@ -35,6 +35,7 @@ import numpy as np
 
 from rasterize.commonroad import RecordedTraffic, load_scenario
 from rasterize.errors import InputError
+from rasterize.timebase import REPLAN_HZ
 from riskmap.data.collect_commonroad import (
     CommonRoadCollectConfig,
     no_demonstrators_message,
@@ -152,7 +153,7 @@ def markdown_table(results: dict) -> str:
 def evaluate_commonroad(recordings: list[str | Path], planners: tuple[str, ...], out: Path,
                         seed: int = 0, resume: bool = False, progress: bool = True,
                         workers: int = 1, goal: str = "route", mode: str = "log",
-                        goal_variance: float | None = None, replan_hz: int = 2) -> dict:
+                        goal_variance: float | None = None, replan_hz: int = REPLAN_HZ) -> dict:
     """Run every planner on every recorded demonstrator (episodes on `workers` processes) towards
     `goal` among others replayed in `mode` (riskmap.sim.commonroad_replay.ReplayConfig: route or
     human; log or reactive); `goal_variance` (cells²) overrides risk-map planners' planning-time

@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from rasterize.errors import InputError
+from rasterize.timebase import CONTROL_HZ
 from riskmap.guard.events import nearest_by_separation, scene_separations
 from riskmap.guard.features import EDGE_DIM, MAX_HORIZON_S, NODE_DIM, OBSERVED, SEGMENT_S, window_features
 from riskmap.infra.atomic import write_json, write_npz
@@ -55,7 +56,7 @@ class GuardCollectConfig:
     planner_every: int = 4            # every k-th episode is driven by the risk-map planner too
     seed: int = 0
     episode_s: float = 20.0           # simulated seconds per episode (the crash comes early)
-    control_hz: int = 10
+    control_hz: int = CONTROL_HZ
     max_ds_m: float = 50.0            # farther pairs are not interactions
     negatives_per_episode: int = 24
     frame_neighbours: int = 2         # scored per decision frame, as `GuardConfig.neighbours`

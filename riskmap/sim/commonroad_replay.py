@@ -54,6 +54,7 @@ from rasterize.frames import (
 )
 from rasterize.geometry import box_gap
 from rasterize.scene import STATE_DIM, Scene
+from rasterize.timebase import CONTROL_HZ, HISTORY_S, REPLAN_HZ
 from riskmap.sim.control import planned_vehicle_class
 from riskmap.sim.metrics import (
     SafetyConfig,
@@ -73,9 +74,9 @@ MODES = ("log", "reactive")
 
 @dataclass(frozen=True)
 class ReplayConfig:
-    control_hz: int = 10
-    replan_hz: int = 2
-    history_s: float = 2.0
+    control_hz: int = CONTROL_HZ
+    replan_hz: int = REPLAN_HZ
+    history_s: float = HISTORY_S
     gap_radius_m: float = 40.0        # others farther than this do not count for the min gap
     off_road_margin_m: float = 1.0    # beyond the outer lane edge by this much = off the road
     goal: str = "route"               # route: the route rule (what a deployed planner knows);

@@ -13,9 +13,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from rasterize.frames import world_from_ego
+from rasterize.timebase import PLAN_DT_S, PLAN_STEPS
 
 # Waypoint times of a plan (s after it was made): 0.5, 1.0, ... 6.0
-PLAN_TIMES_S = 0.5 * np.arange(1, 13)
+PLAN_TIMES_S = PLAN_DT_S * np.arange(1, PLAN_STEPS + 1)
 
 
 @dataclass(frozen=True)

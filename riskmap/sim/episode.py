@@ -12,6 +12,7 @@ import numpy as np
 
 from rasterize.config import family_of_env
 from rasterize.scene import Scene
+from rasterize.timebase import CONTROL_HZ
 from riskmap.sim import fast_road
 from riskmap.sim.control import hand_over_to_planner
 from riskmap.sim.metrics import centre_off_lane, min_box_gap, vehicle_box
@@ -55,7 +56,7 @@ def episode_seed(seed: int, episode: int) -> int:
     return int(np.random.SeedSequence([seed, episode]).generate_state(1)[0])
 
 
-def make_env(env_id: str, record_hz: int = 10, fast: bool | None = None):
+def make_env(env_id: str, record_hz: int = CONTROL_HZ, fast: bool | None = None):
     """The gymnasium env of `env_id`, simulated at `record_hz`, with its roads upgraded to
     `riskmap.sim.fast_road`'s (same physics, less time) unless `fast` is False; `fast=None`
     follows the environment variable RISKMAP_FAST_ROAD (on unless set to 0)."""
@@ -81,7 +82,7 @@ def make_env(env_id: str, record_hz: int = 10, fast: bool | None = None):
 _ENVS: dict = {}
 
 
-def cached_env(env_id: str, record_hz: int = 10, fast: bool | None = None):
+def cached_env(env_id: str, record_hz: int = CONTROL_HZ, fast: bool | None = None):
     """`make_env(env_id, record_hz, fast)`, made once per process: every episode resets it from
     its own seed, so reuse does not change results."""
     key = (env_id, record_hz, fast_road.fast_by_default() if fast is None else bool(fast))
@@ -164,7 +165,7 @@ class Episode:
     A `riskmap.sim.world.World`: the planner's scenes come from the recorder.
     """
 
-    def __init__(self, env, env_id: str, seed: int, episode: int, rate_hz: int = 10,
+    def __init__(self, env, env_id: str, seed: int, episode: int, rate_hz: int = CONTROL_HZ,
                  setup=None, static_agents: int = 0):
         """`setup(base_env)`, if given, rearranges the road after the human ego is installed and
         before anything is recorded (scenario templates set their initial conditions there).

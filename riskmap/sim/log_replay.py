@@ -19,6 +19,7 @@ from rasterize.config import family_of_env
 from rasterize.errors import InputError
 from rasterize.frames import ego_from_world, heading_angle, highway_env_from_world, world_from_highway_env
 from rasterize.scene import Scene
+from rasterize.timebase import CONTROL_HZ
 from riskmap.infra.atomic import write_npz
 from riskmap.sim.episode import FAMILY_SETUPS, Episode
 from riskmap.sim.metrics import centre_off_lane
@@ -140,7 +141,7 @@ class LogReplayEpisode(Episode):
     reset places them again, and they replay their records like every other vehicle.
     """
 
-    def __init__(self, env, env_id: str, seed: int, episode: int, log: HumanLog, rate_hz: int = 10,
+    def __init__(self, env, env_id: str, seed: int, episode: int, log: HumanLog, rate_hz: int = CONTROL_HZ,
                  replay_ego: bool = False, static_agents: int = 0):
         super().__init__(env, env_id, seed, episode, rate_hz, static_agents=static_agents)
         if abs(log.dt_s - self.dt) > 1e-9:

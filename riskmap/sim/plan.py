@@ -16,9 +16,7 @@ import numpy as np
 
 from rasterize.errors import InputError
 from rasterize.scene import Scene
-
-PLAN_STEPS = 12      # waypoints
-PLAN_DT_S = 0.5      # seconds between waypoints (6 s at 2 Hz)
+from rasterize.timebase import PLAN_DT_S, PLAN_STEPS  # noqa: F401  (re-exported: 12 waypoints, 0.5 s apart)
 
 
 @dataclass

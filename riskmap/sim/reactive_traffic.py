@@ -14,6 +14,7 @@ import numpy as np
 
 from rasterize.commonroad import RecordedTraffic
 from rasterize.scene import STATE_DIM
+from riskmap.sim.idm import idm_acceleration, idm_desired_gap
 
 
 @dataclass(frozen=True)
@@ -31,17 +32,18 @@ class IdmParams:
     min_desired_speed_mps: float = 0.1   # keeps the free-road term finite where the log stood still
 
     def desired_gap(self, speed: float, closing: float) -> float:
-        """s* (m) at `speed` closing in on the ego at `closing` m/s."""
-        dynamic = speed * self.headway_s + speed * closing / (
-            2.0 * np.sqrt(self.max_accel_mps2 * self.comfort_decel_mps2))
-        return self.min_gap_m + max(0.0, dynamic)
+        """s* (m) at `speed` closing in on the ego at `closing` m/s (`riskmap.sim.idm`)."""
+        return idm_desired_gap(speed, closing, min_gap_m=self.min_gap_m, headway_s=self.headway_s,
+                               max_accel_mps2=self.max_accel_mps2, comfort_decel_mps2=self.comfort_decel_mps2)
 
     def accel(self, speed: float, desired_speed: float, gap: float | None = None,
               desired_gap: float = 0.0) -> float:
-        """IDM acceleration: free road towards `desired_speed`, plus the ego term when `gap` is set."""
-        free = 1.0 - (speed / max(desired_speed, self.min_desired_speed_mps)) ** 4
-        interaction = 0.0 if gap is None else (desired_gap / max(gap, 1e-3)) ** 2
-        return max(-self.max_decel_mps2, self.max_accel_mps2 * (free - interaction))
+        """IDM acceleration (`riskmap.sim.idm`, exponent 4): free road towards `desired_speed`
+        (at least `min_desired_speed_mps`), plus the ego term with s* = `desired_gap` when `gap`
+        is set."""
+        return idm_acceleration(speed, max(desired_speed, self.min_desired_speed_mps),
+                                max_accel_mps2=self.max_accel_mps2, max_decel_mps2=self.max_decel_mps2,
+                                delta=4, gap_m=gap, desired_gap_m=desired_gap)
 
 
 class _RecordedPath:

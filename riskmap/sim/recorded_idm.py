@@ -41,6 +41,7 @@ from rasterize.commonroad import RecordedTraffic, _lanelet_under
 from rasterize.errors import InputError
 from rasterize.frames import ego_from_world
 from rasterize.scene import Scene
+from riskmap.sim.idm import idm_acceleration, idm_desired_gap
 from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, Plan
 
 HORIZON_S = PLAN_STEPS * PLAN_DT_S
@@ -90,15 +91,15 @@ def idm_accel(speed: float, params: IdmMobilParams, gap: float | None = None,
     """IDM acceleration (m/s^2) at `speed`, free road when `gap` (bumper to bumper, m) is None.
 
     a = a_max [1 - (v / v0)^delta - (s* / s)^2], s* = s0 + max(0, v T + v (v - v_lead) / (2 sqrt(a b))),
-    bounded below by the hardest braking (IDM's own term is unbounded as the gap closes)."""
+    bounded below by the hardest braking (IDM's own term is unbounded as the gap closes).
+    The law is `riskmap.sim.idm`'s; a negative speed counts as 0 in the free-road term."""
     p = params
-    free = (max(speed, 0.0) / p.desired_speed_mps) ** p.delta
-    interaction = 0.0
+    desired = 0.0
     if gap is not None:
-        desired = p.min_gap_m + max(0.0, speed * p.headway_s + speed * (speed - lead_speed) / (
-            2.0 * np.sqrt(p.max_accel_mps2 * p.comfort_decel_mps2)))
-        interaction = (desired / max(gap, 1e-3)) ** 2
-    return max(-p.max_decel_mps2, p.max_accel_mps2 * (1.0 - free - interaction))
+        desired = idm_desired_gap(speed, speed - lead_speed, min_gap_m=p.min_gap_m, headway_s=p.headway_s,
+                                  max_accel_mps2=p.max_accel_mps2, comfort_decel_mps2=p.comfort_decel_mps2)
+    return idm_acceleration(max(speed, 0.0), p.desired_speed_mps, max_accel_mps2=p.max_accel_mps2,
+                            max_decel_mps2=p.max_decel_mps2, delta=p.delta, gap_m=gap, desired_gap_m=desired)
 
 
 @dataclass(frozen=True)

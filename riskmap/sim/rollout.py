@@ -18,6 +18,7 @@ import numpy as np
 from rasterize.config import family_of_env
 from rasterize.errors import InputError
 from rasterize.frames import ego_pose
+from rasterize.timebase import CONTROL_HZ, HISTORY_S, REPLAN_HZ
 from riskmap.sim.control import ControllerConfig, TrackingController
 from riskmap.sim.episode import FAMILY_SETUPS, Episode
 from riskmap.sim.plan import check_plan, drives_itself
@@ -30,11 +31,11 @@ class DriveConfig:
     env_id: str
     episodes: int
     seed: int = 0
-    control_hz: int = 10
-    replan_hz: int = 2
+    control_hz: int = CONTROL_HZ
+    replan_hz: int = REPLAN_HZ
     episode_s: float | None = None     # default: the family's episode length
     gap_radius_m: float = 40.0         # others farther than this do not count for the min gap
-    history_s: float = 2.0
+    history_s: float = HISTORY_S
 
     def __post_init__(self) -> None:
         family = family_of_env(self.env_id)
@@ -85,7 +86,7 @@ class LoopConfig:
 
     steps: int
     replan_every: int
-    history_s: float = 2.0
+    history_s: float = HISTORY_S
     gap_radius_m: float = 40.0         # others farther than this do not count for the min gap
 
 
