@@ -16,6 +16,25 @@ from riskmap.infra.provenance import provenance
 
 CHECKPOINT_KIND = "riskmap"
 
+# The folder that holds the `riskmap` package: the repository in a source checkout, where the
+# shipped checkpoints/ lie beside it.
+TOOLKIT_ROOT = Path(__file__).resolve().parents[2]
+
+
+def resolve_checkpoint(path: str | Path) -> Path:
+    """`path` where it exists as given (a checkpoint's .safetensors or .json, or a folder of
+    them); else, for a relative path that the toolkit's own folder holds (a default such as
+    `checkpoints/crash_traffic_us101`), that one, so that defaults work from any directory.
+    Otherwise `path` unchanged, for the caller's "not found" message."""
+    path = Path(path)
+    def found(candidate: Path) -> bool:
+        return (candidate.is_dir() or candidate.with_suffix(".safetensors").is_file()
+                or candidate.with_suffix(".json").is_file())
+    if path.is_absolute() or found(path):
+        return path
+    shipped = TOOLKIT_ROOT / path
+    return shipped if found(shipped) else path
+
 
 def save_checkpoint(path: Path, model: torch.nn.Module, sidecar: dict,
                     kind: str = CHECKPOINT_KIND) -> Path:
@@ -68,8 +87,9 @@ def kind_words(kind) -> tuple[str, str]:
 
 def read_sidecar(path: Path, kind: str = CHECKPOINT_KIND) -> dict:
     """The JSON sidecar of checkpoint `path` (without suffix), which must be of `kind`; anything
-    else (missing, unreadable, of no or another kind) is an InputError naming the path."""
-    path = Path(path)
+    else (missing, unreadable, of no or another kind) is an InputError naming the path. A relative
+    path not found here is looked for in the toolkit's own folder (`resolve_checkpoint`)."""
+    path = resolve_checkpoint(path)
     weights = path.with_suffix(".safetensors")
     sidecar = path.with_suffix(".json")
     what, made_by = kind_words(kind)
@@ -97,7 +117,7 @@ def load_tensors(path: Path) -> dict[str, torch.Tensor]:
     inf in them, are an InputError naming the file."""
     from safetensors import SafetensorError
 
-    weights = Path(path).with_suffix(".safetensors")
+    weights = resolve_checkpoint(path).with_suffix(".safetensors")
     try:
         state = load_file(str(weights))
     except (SafetensorError, OSError, ValueError, RuntimeError) as err:
