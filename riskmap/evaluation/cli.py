@@ -39,9 +39,10 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     if args.commonroad:
         from riskmap.evaluation.evaluate_commonroad import evaluate_commonroad
 
-        if args.env or args.episodes:
-            raise InputError("--commonroad evaluates recorded vehicles: drop --env and --episodes")
+        if args.env:
+            raise InputError("--commonroad evaluates recorded vehicles: drop --env")
         evaluate_commonroad(args.commonroad, planners, Path(args.out), seed=args.seed,
+                            limit=args.episodes,
                             resume=args.resume, progress=not args.quiet, workers=args.workers,
                             goal=args.goal or "route", mode=args.mode,
                             goal_variance=args.goal_variance, replan_hz=args.replan_hz)
@@ -138,7 +139,9 @@ def add_parsers(sub) -> None:
                    help="comma-separated planner SPECs: idm, replay, cv, riskmap:PATH, cnn:PATH, "
                         "cnn_lstm:PATH, rvsg:PATH")
     p.add_argument("--env", help="highway-env id (simulated scenes)")
-    p.add_argument("--episodes", type=positive_int, help="episodes (simulated scenes)")
+    p.add_argument("--episodes", type=positive_int,
+                   help="episodes (simulated scenes); with --commonroad: only the first N recorded "
+                        "vehicles, in file order (a quick look; default: every one)")
     p.add_argument("--goal", choices=("route", "human"), default=None,
                    help="with --commonroad: the route rule's goal (default) or the recorded "
                         "vehicle's own end position (the planner paper's protocol)")

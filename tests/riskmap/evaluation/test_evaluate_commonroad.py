@@ -118,3 +118,14 @@ def test_replan_hz_reaches_every_recorded_episode(tmp_path):
     assert json.loads((tmp_path / "10" / "run.json").read_text())["replan_hz"] == 10
     with pytest.raises(InputError, match="--replan-hz 4: must divide"):
         evaluate_commonroad([FIXTURES], ("cv",), tmp_path / "bad", progress=False, replan_hz=4)
+
+
+def test_episodes_limits_a_recorded_evaluation_to_the_first_vehicles(tmp_path, capsys):
+    out = tmp_path / "few"
+    assert main(["evaluate", "--commonroad", str(FIXTURES), "--planners", "replay", "--episodes", "2",
+                 "--out", str(out), "--quiet"]) == 0
+    assert len(list((out / "episodes" / "replay").glob("*.json"))) == 2
+    assert json.loads((out / "results.json").read_text())["episodes"] == 2
+    assert main(["evaluate", "--commonroad", str(FIXTURES), "--planners", "replay", "--env",
+                 "highway-v0", "--out", str(tmp_path / "bad")]) == 2
+    assert "drop --env" in capsys.readouterr().err
