@@ -61,6 +61,7 @@ import numpy as np
 
 from rasterize.config import Extent
 from rasterize.errors import InputError
+from rasterize.geometry import Polyline, drop_repeats
 from rasterize.highway import RouteRule
 from rasterize.scene import STATE_DIM, AgentKind, Lane, LineType, Scene, Signal
 from rasterize.timebase import FUTURE_S, HISTORY_S, PLAN_DT_S
@@ -161,10 +162,7 @@ def _arc_length(points: np.ndarray) -> float:
 
 
 def _distance_to_polyline(point: np.ndarray, line: np.ndarray) -> float:
-    a, b = line[:-1], line[1:]
-    ab = b - a
-    t = np.clip(((point - a) * ab).sum(axis=1) / np.maximum((ab * ab).sum(axis=1), 1e-12), 0, 1)
-    return float(np.linalg.norm(a + t[:, None] * ab - point, axis=1).min())
+    return Polyline(line).nearest(point)[2]
 
 
 def _start_arc_lengths(network) -> dict[int, float]:
@@ -308,11 +306,8 @@ def _stop_line_of(lanelet) -> np.ndarray:
 
 def _direction_at(centre: np.ndarray, point: np.ndarray) -> np.ndarray:
     """Unit direction [2] of a centre line at the segment nearest `point`."""
-    a, b = centre[:-1], centre[1:]
-    ab = b - a
-    t = np.clip(((point - a) * ab).sum(axis=1) / np.maximum((ab * ab).sum(axis=1), 1e-12), 0, 1)
-    seg = int(np.argmin(np.linalg.norm(a + t[:, None] * ab - point, axis=1)))
-    d = ab[seg]
+    line = Polyline(centre)
+    d = line.segments[line.nearest(point)[0]]
     return d / max(float(np.linalg.norm(d)), 1e-12)
 
 
@@ -719,13 +714,10 @@ def _centre_line_ahead(network, state: np.ndarray, length_m: float,
     lanelet = _lanelet_under(network, state, rank)
     if lanelet is None:
         return None
-    centre = np.asarray(lanelet.center_vertices, dtype=np.float64)
-    a, b = centre[:-1], centre[1:]
-    ab = b - a
-    t = np.clip(((state[:2] - a) * ab).sum(axis=1) / np.maximum((ab * ab).sum(axis=1), 1e-12), 0, 1)
-    proj = a + t[:, None] * ab
-    seg = int(np.argmin(np.linalg.norm(proj - state[:2], axis=1)))
-    points = [proj[seg][None], centre[seg + 1:]]
+    centre = Polyline(np.asarray(lanelet.center_vertices, dtype=np.float64))
+    seg, t, _ = centre.nearest(state[:2])
+    proj = centre.points[seg] + t * centre.segments[seg]
+    points = [proj[None], centre.points[seg + 1:]]
     total = _arc_length(np.concatenate(points))
     ids = [int(lanelet.lanelet_id)]
     while total < length_m and lanelet.successor:
@@ -738,9 +730,7 @@ def _centre_line_ahead(network, state: np.ndarray, length_m: float,
         more = np.asarray(lanelet.center_vertices, dtype=np.float64)
         points.append(more)
         total += _arc_length(more)
-    line = np.concatenate(points)
-    keep = np.concatenate([[True], np.linalg.norm(np.diff(line, axis=0), axis=1) > 1e-6])
-    return line[keep], ids
+    return drop_repeats(np.concatenate(points)), ids
 
 
 def _first_crossing(line: np.ndarray, s_line: np.ndarray, segment: np.ndarray,
@@ -865,9 +855,10 @@ def route_on_lanelets(network, ego_state: np.ndarray, ego_length_m: float, other
     if line is None or len(line) < 2:
         line, ids = np.stack([ego_state[:2], ego_state[:2] + reach * ego_state[2:4]]), []
     line = np.concatenate([ego_state[None, :2], line[1:]]) if len(line) > 1 else line
-    s_line = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(line, axis=0), axis=1))])
+    route = Polyline(line)
+    s_line = route.arc
     along = np.arange(0.0, reach + rule.sample_m, rule.sample_m)
-    dense = np.stack([np.interp(along, s_line, line[:, 0]), np.interp(along, s_line, line[:, 1])], 1)
+    dense = route.point_at(along)
     distance = free
     for other, length in zip(np.asarray(others).reshape(-1, STATE_DIM), np.asarray(other_lengths_m)):
         if np.linalg.norm(other[:2] - ego_state[:2]) > reach + 10.0:

@@ -21,6 +21,7 @@ import numpy as np
 
 from rasterize.config import RasterConfig
 from rasterize.frames import ego_from_world, ego_pose, pixel_from_ego
+from rasterize.geometry import Polyline
 from rasterize.predict import predict_along_lanes, prediction_times
 from rasterize.scene import Lane, LineType, Scene, Signal
 
@@ -133,9 +134,9 @@ _DASH_SAMPLE_M = 0.5
 
 def _dashes(line: np.ndarray, start_s: float) -> list[np.ndarray]:
     """Cut a polyline [P, 2] into its painted dashes, phase anchored at the lane's arc length."""
-    seg = np.linalg.norm(np.diff(line, axis=0), axis=1)
-    s = start_s + np.concatenate([[0.0], np.cumsum(seg)])
-    if s[-1] - s[0] < 1e-9:
+    boundary = Polyline(line, start_m=start_s)
+    s = boundary.arc
+    if boundary.length < 1e-9:
         return []
     # Sample every _DASH_SAMPLE_M and at every dash end, then keep the painted runs.
     first = np.floor(s[0] / DASH_PERIOD_M) * DASH_PERIOD_M
@@ -148,7 +149,7 @@ def _dashes(line: np.ndarray, start_s: float) -> list[np.ndarray]:
     # A run starts where painting starts or where a new period begins (phase wraps to 0).
     new_run = painted & np.concatenate([[True], ~painted[:-1] | (phase[1:] < phase[:-1])])
     run_id = np.cumsum(new_run)
-    pts = np.stack([np.interp(knots, s, line[:, 0]), np.interp(knots, s, line[:, 1])], axis=1)
+    pts = boundary.point_at(knots)
     ids = run_id[painted]
     pts = pts[painted]
     cuts = np.flatnonzero(np.diff(ids)) + 1

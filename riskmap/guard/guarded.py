@@ -31,6 +31,7 @@ import numpy as np
 
 from rasterize.errors import InputError
 from rasterize.frames import ego_from_world, ego_pose
+from rasterize.geometry import Polyline
 from rasterize.scene import Scene
 from riskmap.guard.events import nearest_neighbours
 from riskmap.guard.features import OBSERVED, SEGMENT_S
@@ -71,18 +72,14 @@ def obstacle_ahead(scene: Scene, ahead_m: float, lateral_m: float) -> bool:
 
 def decelerated_waypoints(waypoints: np.ndarray, speed_mps: float, decel_mps2: float) -> np.ndarray:
     """The plan's path [12, 2] (ego frame) re-timed to v(t) = max(v0 − a·t, 0)."""
-    path = np.concatenate([[[0.0, 0.0]], np.asarray(waypoints, dtype=np.float64)])
-    seg = np.diff(path, axis=0)
-    s = np.concatenate([[0.0], np.cumsum(np.linalg.norm(seg, axis=1))])
+    path = Polyline(np.concatenate([[[0.0, 0.0]], np.asarray(waypoints, dtype=np.float64)]))
     t = PLAN_DT_S * np.arange(1, len(waypoints) + 1)
     t_stop = speed_mps / decel_mps2
     arc = np.where(t < t_stop, speed_mps * t - 0.5 * decel_mps2 * t ** 2, 0.5 * speed_mps * t_stop)
-    out = np.stack([np.interp(arc, s, path[:, 0]), np.interp(arc, s, path[:, 1])], axis=1)
-    beyond = arc > s[-1]
-    if beyond.any():   # past the planned path: continue straight along its last direction
-        last = seg[-1] / max(np.linalg.norm(seg[-1]), 1e-9) if s[-1] > 1e-9 else np.array([1.0, 0.0])
-        out[beyond] = path[-1] + (arc[beyond] - s[-1])[:, None] * last
-    return out
+    # Past the planned path: continue straight along its last direction.
+    seg = path.segments[-1]
+    last = seg / max(np.linalg.norm(seg), 1e-9) if path.length > 1e-9 else np.array([1.0, 0.0])
+    return path.point_at(arc, beyond=last)
 
 
 class Guard:

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rasterize.frames import world_from_ego
+from rasterize.geometry import Polyline
 from rasterize.timebase import PLAN_DT_S, PLAN_STEPS
 
 # Waypoint times of a plan (s after it was made): 0.5, 1.0, ... 6.0
@@ -36,15 +37,15 @@ class TrackingController:
     def __init__(self, config: ControllerConfig = ControllerConfig()):
         self.config = config
         self.path = None          # [13, 2] world: plan origin then the waypoints
+        self._line = None         # the path as a Polyline
         self._integral = 0.0
 
     def set_plan(self, waypoints_ego: np.ndarray, origin: np.ndarray, heading: float) -> None:
         pts = np.concatenate([[[0.0, 0.0]], np.asarray(waypoints_ego, dtype=np.float64)])
         self.path = world_from_ego(pts, origin, heading)
-        seg = np.linalg.norm(np.diff(self.path, axis=0), axis=1)
-        self._s = np.concatenate([[0.0], np.cumsum(seg)])
+        self._line = Polyline(self.path)
         # Speed the plan implies over each 0.5 s interval.
-        self._speeds = seg / 0.5
+        self._speeds = self._line.lengths / 0.5
 
     def target_speed(self, since_plan_s: float) -> float:
         """The plan's mean speed over the 0.5 s interval `since_plan_s` falls in."""
@@ -64,17 +65,14 @@ class TrackingController:
         return float(self._speeds[k] + slope * (since_plan_s - mids[k])), float(slope)
 
     def _lookahead_point(self, position: np.ndarray, distance: float) -> np.ndarray:
-        path, s = self.path, self._s
-        seg = np.diff(path, axis=0)
-        lengths = np.maximum((seg * seg).sum(1), 1e-12)
-        t = np.clip(((position - path[:-1]) * seg).sum(1) / lengths, 0, 1)
-        closest = path[:-1] + t[:, None] * seg
-        i = int(np.argmin(np.linalg.norm(closest - position, axis=1)))
-        target_s = s[i] + t[i] * np.sqrt(lengths[i]) + distance
-        if target_s >= s[-1]:  # beyond the plan: continue straight along its last segment
-            direction = seg[-1] / np.sqrt(lengths[-1]) if s[-1] > 1e-6 else np.zeros(2)
-            return path[-1] + (target_s - s[-1]) * direction
-        return np.array([np.interp(target_s, s, path[:, 0]), np.interp(target_s, s, path[:, 1])])
+        line = self._line
+        i, t, _ = line.nearest(position)
+        # Segment lengths floored at 1e-6 m (a plan that stands still has zero-length ones).
+        target_s = line.arc[i] + t * max(line.lengths[i], 1e-6) + distance
+        # Beyond the plan: continue straight along its last segment.
+        direction = (line.segments[-1] / max(line.lengths[-1], 1e-6) if line.length > 1e-6
+                     else np.zeros(2))
+        return line.point_at(target_s, beyond=direction)
 
     def action(self, position: np.ndarray, heading: float, speed: float, since_plan_s: float,
                dt: float) -> tuple[float, float]:
@@ -91,7 +89,7 @@ class TrackingController:
         accel = a_plan + cfg.kp_per_s * error + cfg.ki_per_s2 * self._integral
         accel = float(np.clip(accel, cfg.accel_min_mps2, cfg.accel_max_mps2))
         accel = max(accel, -speed / dt)       # brake to a stop, never into reverse
-        if self._s[-1] < 0.5:                 # a plan to stay put
+        if self._line.length < 0.5:           # a plan to stay put
             return accel, 0.0
         lookahead = max(cfg.lookahead_min_m, speed * cfg.lookahead_time_s)
         target = self._lookahead_point(position, lookahead)

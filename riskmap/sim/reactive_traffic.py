@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rasterize.commonroad import RecordedTraffic
+from rasterize.geometry import Polyline, arc_lengths
 from rasterize.scene import STATE_DIM
 from riskmap.sim.idm import idm_acceleration, idm_desired_gap
 
@@ -57,7 +58,8 @@ class _RecordedPath:
         self.xy = traffic.states[agent, first: last + 1, :2]
         self.speed = traffic.states[agent, first: last + 1, 4]
         self.t = np.arange(first, last + 1) * traffic.dt_s
-        self.arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(self.xy, axis=0), axis=1))])
+        self.arc = arc_lengths(self.xy)
+        self.line = Polyline(self.xy) if len(self.xy) >= 2 else None
 
     def present(self, time_s: float) -> bool:
         return self.t[0] - 1e-9 <= time_s <= self.t[-1] + 1e-9
@@ -80,16 +82,13 @@ class _RecordedPath:
 
     def locate(self, xy: np.ndarray, tolerance_m: float) -> tuple[float, np.ndarray] | None:
         """Arc length and unit direction of the path nearest `xy`, if within `tolerance_m` of it."""
-        if len(self.xy) < 2:
+        if self.line is None:
             return None
-        a, d = self.xy[:-1], np.diff(self.xy, axis=0)
-        length2 = np.einsum("ij,ij->i", d, d)
-        u = np.clip(np.einsum("ij,ij->i", xy - a, d) / np.maximum(length2, 1e-12), 0.0, 1.0)
-        dist = np.linalg.norm(a + u[:, None] * d - xy, axis=1)
-        k = int(np.argmin(dist))
-        if dist[k] > tolerance_m or length2[k] < 1e-12:
+        k, u, distance = self.line.nearest(xy)
+        d = self.line.segments[k]
+        if distance > tolerance_m or (d * d).sum() < 1e-12:
             return None
-        return float(self.arc[k] + u[k] * np.sqrt(length2[k])), d[k] / np.sqrt(length2[k])
+        return float(self.arc[k] + u * self.line.lengths[k]), d / self.line.lengths[k]
 
 
 class ReactiveTraffic:

@@ -40,6 +40,7 @@ import numpy as np
 from rasterize.commonroad import RecordedTraffic, _lanelet_under
 from rasterize.errors import InputError
 from rasterize.frames import ego_from_world
+from rasterize.geometry import Polyline, drop_repeats
 from rasterize.scene import Scene
 from riskmap.sim.idm import idm_acceleration, idm_desired_gap
 from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, Plan
@@ -144,42 +145,11 @@ def idm_distances(speed: float, length_m: float, leaders: list[_Car],
 
 # --- geometry ------------------------------------------------------------------------------------
 
-class _Polyline:
-    """A line [K, 2] with arc length; past either end it runs straight on along the end segment
-    (so positions beyond the mapped lanes stay finite)."""
-
-    def __init__(self, points: np.ndarray):
-        points = np.asarray(points, dtype=np.float64)
-        keep = np.concatenate([[True], np.linalg.norm(np.diff(points, axis=0), axis=1) > 1e-6])
-        self.points = points[keep]
-        if len(self.points) < 2:
-            raise ValueError("a polyline needs two distinct points")
-        seg = np.diff(self.points, axis=0)
-        self.lengths = np.linalg.norm(seg, axis=1)
-        self.tangents = seg / self.lengths[:, None]
-        self.arc = np.concatenate([[0.0], np.cumsum(self.lengths)])
-
-    def project(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Arc length [P] and signed lateral offset [P] (left positive) of points [P, 2]."""
-        xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
-        rel = xy[:, None, :] - self.points[None, :-1]
-        along = np.einsum("pkd,kd->pk", rel, self.tangents)
-        low = np.full(len(self.lengths), 0.0)
-        high = self.lengths.copy()
-        low[0], high[-1] = -np.inf, np.inf           # the straight continuations
-        along = np.clip(along, low, high)
-        foot = self.points[None, :-1] + along[..., None] * self.tangents[None]
-        k = np.argmin(np.linalg.norm(xy[:, None, :] - foot, axis=2), axis=1)
-        rows = np.arange(len(xy))
-        t = self.tangents[k]
-        d = xy - foot[rows, k]
-        return self.arc[k] + along[rows, k], t[:, 0] * d[:, 1] - t[:, 1] * d[:, 0]
-
-    def at(self, arc: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Points [M, 2] and unit tangents [M, 2] at arc lengths [M]."""
-        arc = np.asarray(arc, dtype=np.float64).reshape(-1)
-        k = np.clip(np.searchsorted(self.arc, arc, side="right") - 1, 0, len(self.lengths) - 1)
-        return self.points[k] + (arc - self.arc[k])[:, None] * self.tangents[k], self.tangents[k]
+def _line(points: np.ndarray) -> Polyline:
+    """The line through `points` [K, 2] without repeated points; past either end it runs straight
+    on along the end segment (`Polyline.pose_at`, `Polyline.project`), so positions beyond the
+    mapped lanes stay finite."""
+    return Polyline(drop_repeats(np.asarray(points, dtype=np.float64)))
 
 
 def _left_normal(tangent: np.ndarray) -> np.ndarray:
@@ -240,7 +210,7 @@ class LaneRoute:
     def previous(self, lanelet):
         return self._pick(lanelet.predecessor)
 
-    def centre_line(self, lanelet, ahead_m: float, behind_m: float) -> _Polyline:
+    def centre_line(self, lanelet, ahead_m: float, behind_m: float) -> Polyline:
         """The lane's centre line through `lanelet`: predecessors for `behind_m`, successors for
         `ahead_m` beyond it (each along the route choice)."""
         parts = [np.asarray(lanelet.center_vertices, dtype=np.float64)]
@@ -257,7 +227,7 @@ class LaneRoute:
                 else:
                     parts.append(centre)
                 total += float(np.linalg.norm(np.diff(centre, axis=0), axis=1).sum())
-        return _Polyline(np.concatenate(parts))
+        return _line(np.concatenate(parts))
 
     def may_change_to(self, lanelet, neighbour) -> bool:
         """Whether MOBIL may move from `lanelet` onto its neighbour (module docstring): on the
@@ -303,19 +273,19 @@ class _Others:
         keep = keep[keep != scene.ego_index]
         return cls(scene.states[keep, now], scene.sizes[keep, 0])
 
-    def leader_on(self, line: _Polyline, half_width_m: float, ego_xy: np.ndarray) -> _Car | None:
+    def leader_on(self, line: Polyline, half_width_m: float, ego_xy: np.ndarray) -> _Car | None:
         """The nearest vehicle ahead of the ego on `line`, its arc measured from the ego's."""
         ego_arc = float(line.project(ego_xy)[0][0])
         ahead = [c for c in self.on(line, half_width_m) if c.arc_m > ego_arc]
         lead = min(ahead, key=lambda c: c.arc_m, default=None)
         return None if lead is None else _Car(lead.arc_m - ego_arc, lead.speed_mps, lead.length_m)
 
-    def on(self, line: _Polyline, half_width_m: float) -> list[_Car]:
+    def on(self, line: Polyline, half_width_m: float) -> list[_Car]:
         """The vehicles within `half_width_m` of `line`, as cars on it (speed along it)."""
         if not len(self.states):
             return []
         arc, lateral = line.project(self.states[:, :2])
-        _, tangent = line.at(arc)
+        _, tangent = line.pose_at(arc)
         speed = self.states[:, 4] * np.einsum("md,md->m", self.states[:, 2:4], tangent)
         return [_Car(float(arc[i]), max(0.0, float(speed[i])), float(self.lengths[i]))
                 for i in np.flatnonzero(np.abs(lateral) <= half_width_m)]
@@ -388,7 +358,7 @@ class RecordedRouteIdmPlanner:
         path, watched = self._path(ego, length, others)
         leaders = [lead for line, half_width in watched
                    if (lead := others.leader_on(line, half_width, ego[:2])) is not None]
-        xy, _ = path.at(idm_distances(float(ego[4]), length, leaders, self.params))
+        xy, _ = path.pose_at(idm_distances(float(ego[4]), length, leaders, self.params))
         return Plan(ego_from_world(xy, ego[:2], float(np.arctan2(ego[3], ego[2]))))
 
     def _reach(self, speed: float) -> float:
@@ -400,7 +370,7 @@ class RecordedRouteIdmPlanner:
         return max(self.params.min_lane_change_m, speed * self.params.lane_change_s)
 
     def _path(self, ego: np.ndarray, length: float,
-              others: _Others) -> tuple[_Polyline, list[tuple[_Polyline, float]]]:
+              others: _Others) -> tuple[Polyline, list[tuple[Polyline, float]]]:
         """The path ahead of the ego (from where it is), and the lines (with half their lane's
         width) whose leaders it follows: the path; during a change also the target lane, and the
         lane it leaves until its centre is out of it (the blended path alone would lose a leader
@@ -409,7 +379,7 @@ class RecordedRouteIdmPlanner:
         lanelet = _lanelet_under(self.network, ego)
         if lanelet is None:
             self._change = None
-            path = _Polyline(np.stack([ego[:2], ego[:2] + reach * ego[2:4]]))
+            path = _line(np.stack([ego[:2], ego[:2] + reach * ego[2:4]]))
             return path, [(path, 0.5 * self.params.lane_width_m)]
         target = self._committed_target(lanelet)
         if target is None:
@@ -461,11 +431,11 @@ class RecordedRouteIdmPlanner:
     def _queue(self, lanelet, ego: np.ndarray, length: float, others: _Others, reach: float) -> _Queue:
         line = self.route.centre_line(lanelet, reach, self.params.behind_m)
         arc, _ = line.project(ego[:2])
-        _, tangent = line.at(arc)
+        _, tangent = line.pose_at(arc)
         me = _Car(float(arc[0]), max(0.0, float(ego[4] * np.dot(ego[2:4], tangent[0]))), length)
         return _Queue.of(me, others.on(line, 0.5 * _width(lanelet)), self.params.behind_m)
 
-    def _blended(self, line: _Polyline, ego: np.ndarray, reach: float) -> _Polyline:
+    def _blended(self, line: Polyline, ego: np.ndarray, reach: float) -> Polyline:
         """The path from the ego onto `line`: its lateral offset fades out (cosine over arc length)
         along a committed change's remaining blend, or a lane-keeping one."""
         arc, lateral = line.project(ego[:2])
@@ -479,6 +449,6 @@ class RecordedRouteIdmPlanner:
         else:
             start, progress, length = offset, 0.0, self._blend_length(float(ego[4]))
         ds = np.arange(0.0, reach + PATH_STEP_M, PATH_STEP_M)
-        xy, tangent = line.at(arc[0] + ds)
+        xy, tangent = line.pose_at(arc[0] + ds)
         fade = start * (1.0 - _cosine_blend(progress + ds / length))
-        return _Polyline(xy + fade[:, None] * _left_normal(tangent))
+        return _line(xy + fade[:, None] * _left_normal(tangent))
