@@ -39,10 +39,11 @@ def _cmd_evaluate(args: argparse.Namespace) -> int:
     if args.commonroad:
         from riskmap.evaluation.evaluate_commonroad import evaluate_commonroad
 
-        if args.env:
-            raise InputError("--commonroad evaluates recorded vehicles: drop --env")
+        if args.env or args.episodes:
+            raise InputError("--commonroad evaluates recorded vehicles: drop --env and --episodes "
+                             "(--max-episodes N evaluates N of them)")
         evaluate_commonroad(args.commonroad, planners, Path(args.out), seed=args.seed,
-                            limit=args.episodes,
+                            limit=args.max_episodes,
                             resume=args.resume, progress=not args.quiet, workers=args.workers,
                             goal=args.goal or "route", mode=args.mode,
                             goal_variance=args.goal_variance, replan_hz=args.replan_hz)
@@ -139,9 +140,10 @@ def add_parsers(sub) -> None:
                    help="comma-separated planner SPECs: idm, replay, cv, riskmap:PATH, cnn:PATH, "
                         "cnn_lstm:PATH, rvsg:PATH")
     p.add_argument("--env", help="highway-env id (simulated scenes)")
-    p.add_argument("--episodes", type=positive_int,
-                   help="episodes (simulated scenes); with --commonroad: only the first N recorded "
-                        "vehicles, in file order (a quick look; default: every one)")
+    p.add_argument("--episodes", type=positive_int, help="episodes (simulated scenes)")
+    p.add_argument("--max-episodes", type=positive_int, default=None,
+                   help="with --commonroad: evaluate N of the recorded vehicles, drawn with --seed "
+                        "(the same N for every planner; default: every one)")
     p.add_argument("--goal", choices=("route", "human"), default=None,
                    help="with --commonroad: the route rule's goal (default) or the recorded "
                         "vehicle's own end position (the planner paper's protocol)")

@@ -159,7 +159,8 @@ def evaluate_commonroad(recordings: list[str | Path], planners: tuple[str, ...],
     `goal` among others replayed in `mode` (riskmap.sim.commonroad_replay.ReplayConfig: route or
     human; log or reactive); `goal_variance` (cells²) overrides risk-map planners' planning-time
     goal variance; `replan_hz`: how often planners replan (a divisor of the 10 Hz control rate);
-    `limit`: only the first that many recorded vehicles (file order). Returns {planner: summary}."""
+    `limit`: only that many recorded vehicles, drawn with `seed` (kept in file order), the same
+    ones for every planner. Returns {planner: summary}."""
     from tqdm import tqdm
 
     from riskmap.sim.commonroad_replay import ReplayConfig
@@ -178,14 +179,16 @@ def evaluate_commonroad(recordings: list[str | Path], planners: tuple[str, ...],
     episodes = [(d.path, traffics[d.path].name, int(traffics[d.path].ids[d.agent])) for d in demos]
     if limit is not None:
         if limit < 1:
-            raise InputError(f"--episodes {limit}: give at least 1 recorded vehicle")
-        episodes = episodes[:limit]
+            raise InputError(f"--max-episodes {limit}: give at least 1 recorded vehicle")
+        if limit < len(episodes):
+            keep = np.sort(np.random.default_rng(seed).choice(len(episodes), limit, replace=False))
+            episodes = [episodes[i] for i in keep]
     for spec in planners:           # a bad SPEC fails here, before anything is written
         if spec not in ("replay", "idm"):       # these two are made per recorded vehicle
             _planner(spec, None, 0, seed, goal_variance)
     meta = {"recordings": [str(p) for p in files], "planners": list(planners), "seed": seed, "goal": goal,
             "mode": mode, **({"goal_variance": goal_variance} if goal_variance is not None else {}),
-            **({"episodes": limit} if limit is not None else {}),
+            **({"max_episodes": limit} if limit is not None else {}),
             # named only when not the default, so run.json of runs from before it still resume
             **({"replan_hz": replan_hz} if replan_hz != ReplayConfig.replan_hz else {})}
     # Records are per planner and episode, so a resumed run may name more (or fewer) planners:

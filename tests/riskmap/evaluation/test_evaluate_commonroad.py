@@ -120,12 +120,15 @@ def test_replan_hz_reaches_every_recorded_episode(tmp_path):
         evaluate_commonroad([FIXTURES], ("cv",), tmp_path / "bad", progress=False, replan_hz=4)
 
 
-def test_episodes_limits_a_recorded_evaluation_to_the_first_vehicles(tmp_path, capsys):
-    out = tmp_path / "few"
-    assert main(["evaluate", "--commonroad", str(FIXTURES), "--planners", "replay", "--episodes", "2",
-                 "--out", str(out), "--quiet"]) == 0
-    assert len(list((out / "episodes" / "replay").glob("*.json"))) == 2
-    assert json.loads((out / "results.json").read_text())["episodes"] == 2
-    assert main(["evaluate", "--commonroad", str(FIXTURES), "--planners", "replay", "--env",
-                 "highway-v0", "--out", str(tmp_path / "bad")]) == 2
-    assert "drop --env" in capsys.readouterr().err
+def test_max_episodes_evaluates_a_seeded_choice_of_recorded_vehicles(tmp_path, capsys):
+    def chosen(out, seed):
+        assert main(["evaluate", "--commonroad", str(FIXTURES), "--planners", "replay",
+                     "--max-episodes", "2", "--seed", str(seed), "--out", str(out), "--quiet"]) == 0
+        assert json.loads((out / "results.json").read_text())["max_episodes"] == 2
+        return sorted(p.name for p in (out / "episodes" / "replay").glob("*.json"))
+
+    first = chosen(tmp_path / "a", 0)
+    assert len(first) == 2 and chosen(tmp_path / "b", 0) == first
+    assert main(["evaluate", "--commonroad", str(FIXTURES), "--planners", "replay", "--episodes",
+                 "2", "--out", str(tmp_path / "bad")]) == 2
+    assert "--max-episodes" in capsys.readouterr().err
