@@ -1,0 +1,1 @@
+"""Exports of attacked scenes for other tools (`adversary export`): CommonRoad scenario XML."""

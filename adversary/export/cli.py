@@ -1,0 +1,40 @@
+"""`adversary export`: attacked scenes of an `adversary attack` run as files other tools read."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def _run_export(args: argparse.Namespace) -> int:
+    from adversary.export.commonroad import export_run
+
+    index = export_run(Path(args.run), Path(args.out), args.format, only_failures=args.only_failures,
+                       resume=args.resume, scenes=Path(args.scenes) if args.scenes else None,
+                       names=tuple(args.scene or ()), plot=args.plot, progress=not args.quiet)
+    print(f"{len(index['exported'])} scenes exported to {args.out} ({len(index['skipped'])} skipped; "
+          f"see {Path(args.out) / 'index.json'})")
+    return 0
+
+
+def add_parsers(subparsers) -> None:
+    from adversary.export.commonroad import FORMATS
+
+    p = subparsers.add_parser("export", help="write the attacked scenes of an `adversary attack` run as "
+                                             "CommonRoad scenarios")
+    p.add_argument("--run", required=True, help="the --out folder of an `adversary attack` run")
+    # not argparse choices: an unknown format is one line naming the formats, like every bad input
+    p.add_argument("--format", required=True, help=f"output format: {', '.join(FORMATS)}")
+    p.add_argument("--out", required=True, help="folder for <scene>.xml + <scene>.json (+ .png)")
+    p.add_argument("--only-failures", action="store_true",
+                   help="only scenes in which the ego collided from t0 (the judge's failures)")
+    p.add_argument("--scenes", default=None,
+                   help="the run's scene folder (default: the one its run.json names)")
+    p.add_argument("--scene", action="append", default=None, metavar="NAME",
+                   help="export only this scene (repeatable), e.g. scene_00092")
+    p.add_argument("--plot", action="store_true",
+                   help="also draw each scene with commonroad-io's renderer at the collision step "
+                        "(<scene>.png)")
+    p.add_argument("--resume", action="store_true", help="continue an export into the same --out")
+    p.add_argument("--quiet", action="store_true")
+    p.set_defaults(func=_run_export)
