@@ -22,8 +22,9 @@ counts alike, as the standardised labels make them count. Only the held-out scen
 Files in RUN: run.json (the settings; `--resume` continues only with the same ones), labels.jsonl
 (one line per labelled scene, rewritten atomically as each is computed; `--resume` keeps them;
 every scene with `labels`, the held-out ones with `unrolled`), unrolled_selector_mam.pt /
-unrolled_selector_no_mam.pt (`unrolled` only: weights, optimiser and log, committed atomically
-after every epoch; `--resume` continues from the last one), selector_mam / selector_no_mam
+unrolled_selector_no_mam.pt (`unrolled` only: weights, optimizer and log, committed atomically
+after every epoch, `riskmap.infra.training_run`; `--resume` continues from the last one),
+selector_mam / selector_no_mam
 (safetensors + sidecar naming the objective), summary.json. Labelling draws nothing from torch's
 generator, and the unrolled selectors are initialised and shuffled from generators seeded per
 selector and epoch, so a resumed run trains the same selectors as an uninterrupted one.
@@ -47,9 +48,10 @@ from adversary.crash.selection import SelectionModule, candidates, distance_weig
 from adversary.crash.train_traffic import load_traffic_model, load_windows, scene_collides
 from adversary.crash.unrolled import unrolled_loss
 from riskmap.infra.atomic import atomic_write, write_json
-from riskmap.infra.checkpoint import load_state, load_weights, read_sidecar, save_checkpoint, save_state
+from riskmap.infra.checkpoint import load_weights, read_sidecar, save_checkpoint
 from riskmap.infra.provenance import provenance
-from riskmap.infra.rundir import check_same_settings, lock_out_dir, refuse_unless_resume
+from riskmap.infra.rundir import check_same_settings, lock_out_dir
+from riskmap.infra.training_run import TrainingRun, refuse_unless_resume_run
 
 CHECKPOINT_KIND = "crash_selector"
 
@@ -121,7 +123,7 @@ def train_selector(traffic_checkpoint: Path, data: list[Path], out: Path,
                    config: TrainSelectorConfig = TrainSelectorConfig(), resume: bool = False,
                    progress: bool = True) -> dict:
     out = Path(out)
-    refuse_unless_resume(out, "a run", None, resume)
+    refuse_unless_resume_run(out, resume, "a run", markers=(None,))
     torch.manual_seed(config.seed)
     # The traffic model and the data are read (and bad ones refused) before --out exists.
     model, features, traffic_meta = load_traffic_model(traffic_checkpoint)
@@ -255,32 +257,28 @@ def _state_path(run: _Run, mam: bool) -> Path:
 
 def _train_unrolled(run: _Run, train: list[SceneTensors], mam: bool, resume: bool
                     ) -> tuple[SelectionModule, list[dict]]:
-    """The selector trained through the unrolled generation loss, one atomic commit per epoch."""
+    """The selector trained through the unrolled generation loss, one atomic commit per epoch
+    (no random state: every epoch's order comes from its own generator; no best: the last epoch's
+    selector is the one committed)."""
     config = run.config
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(config.seed * 2 + int(not mam))
         selector = SelectionModule(run.hidden)
-    optimiser = torch.optim.Adam(selector.parameters(), lr=config.lr)
-    log: list[dict] = []
-    if resume and _state_path(run, mam).exists():
-        state = load_state(_state_path(run, mam))
-        selector.load_state_dict(state["selector"])
-        optimiser.load_state_dict(state["optimiser"])
-        log = list(state["log"])
+    optimizer = torch.optim.Adam(selector.parameters(), lr=config.lr)
+    training = TrainingRun(run.out, resume, state=_state_path(run, mam).name, random_state=False)
+    training.resume_from(selector, optimizer)
     started = time.perf_counter()
-    for epoch in range(len(log), config.epochs):
+    for epoch in range(training.first_epoch, config.epochs):
         order = np.random.default_rng([config.seed, int(mam), epoch]).permutation(len(train))
-        losses = [_unrolled_step(run, selector, optimiser, [train[i] for i in order[s:s + UNROLL_BATCH_SCENES]],
+        losses = [_unrolled_step(run, selector, optimizer, [train[i] for i in order[s:s + UNROLL_BATCH_SCENES]],
                                  mam) for s in range(0, len(order), UNROLL_BATCH_SCENES)]
         done = [v for v in losses if v is not None]
-        log.append({"epoch": epoch, "loss": float(np.mean(done)) if done else None,
-                    "skipped_batches": len(losses) - len(done)})
-        save_state(_state_path(run, mam), {"selector": selector.state_dict(), "optimiser": optimiser.state_dict(),
-                                           "log": log})
+        training.commit(selector, optimizer, {"epoch": epoch, "loss": float(np.mean(done)) if done else None,
+                                              "skipped_batches": len(losses) - len(done)})
         if run.progress and (epoch % 5 == 0 or epoch == config.epochs - 1):
-            print(f"{_name(mam)} epoch {epoch + 1}/{config.epochs}: unrolled loss {log[-1]['loss']} "
+            print(f"{_name(mam)} epoch {epoch + 1}/{config.epochs}: unrolled loss {training.log[-1]['loss']} "
                   f"({time.perf_counter() - started:.0f} s)", flush=True)
-    return selector, log
+    return selector, training.log
 
 
 def _unrolled_step(run: _Run, selector: SelectionModule, optimiser, items: list[SceneTensors],

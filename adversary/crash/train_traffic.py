@@ -14,11 +14,11 @@ whose log stops before the horizon: they may leave the mapped area).
 
 Validation holds out whole episodes (the last `val_fraction` of each dataset's shards; for
 recorded data whole moments of traffic, `held_out`). Every epoch ends in one
-atomic write of RUN/state.pt, the commit point that `--resume` continues from: weights,
-optimiser, both random generators, the log and the best weights so far. RUN/log.jsonl (a line
-per epoch) and RUN/best (safetensors + sidecar, the best validation ADE) are derived from it,
-written after it and again on resume, so a run killed anywhere resumes to the files of an
-uninterrupted one. The sidecars name the scenario family and raster extent of the data
+atomic write of RUN/state.pt (`riskmap.infra.training_run`), the commit point that `--resume`
+continues from: weights, optimizer, both random generators, the log and the best epoch's sidecar.
+RUN/log.jsonl (a line per epoch) and RUN/best (safetensors + sidecar, the best validation ADE)
+are derived from it, written after it and again on resume, so a run killed anywhere resumes to
+the files of an uninterrupted one. The sidecars name the scenario family and raster extent of the data
 (`traffic_model_family`), so that an attack can refuse a model of another family.
 
 Realism metrics (`evaluate_model`), on the validation scenes:
@@ -51,9 +51,9 @@ from adversary.crash.traffic_model import TrafficModel, TrafficModelConfig, kl_n
 from rasterize.errors import InputError
 from rasterize.frames import box_corners
 from rasterize.geometry import boxes_overlap
-from riskmap.infra.atomic import atomic_write, write_json
-from riskmap.infra.checkpoint import load_state, load_weights, read_sidecar, save_checkpoint, save_state
-from riskmap.infra.rundir import lock_out_dir, refuse_unless_resume
+from riskmap.infra.atomic import write_json
+from riskmap.infra.checkpoint import load_weights, read_sidecar
+from riskmap.infra.training_run import TrainingRun, jsonl_log
 
 CHECKPOINT_KIND = "traffic_cvae"
 # An agent whose logged future puts its box corners this far off the drivable area in all (m,
@@ -389,21 +389,6 @@ def load_traffic_model(path: Path) -> tuple[TrafficModel, FeatureConfig, dict]:
     return model, features, data
 
 
-def _write_log(out: Path, records: list[dict]) -> None:
-    """RUN/log.jsonl: one line per finished epoch (rewritten whole, atomically)."""
-    atomic_write(out / "log.jsonl", lambda f: f.write("".join(json.dumps(r) + "\n" for r in records).encode()))
-
-
-def _save_best(out: Path, model_config: TrafficModelConfig, features: FeatureConfig, weights: dict,
-               sidecar: dict) -> None:
-    """RUN/best (safetensors + sidecar) from the best epoch's weights. Draws nothing from torch's
-    global generator (training goes on with it)."""
-    with torch.random.fork_rng(devices=[]):
-        model = TrafficModel(model_config, features.lane_chunks, features.chunk_points)
-    model.load_state_dict(weights)
-    save_checkpoint(out / "best", model, sidecar, kind=CHECKPOINT_KIND)
-
-
 def train_traffic(data: list[Path], out: Path, config: TrainTrafficConfig = TrainTrafficConfig(),
                   model_config: TrafficModelConfig | None = None,
                   features: FeatureConfig | None = None, resume: bool = False,
@@ -411,50 +396,44 @@ def train_traffic(data: list[Path], out: Path, config: TrainTrafficConfig = Trai
     model_config = model_config or TrafficModelConfig()
     features = features or FeatureConfig()
     out = Path(out)
-    refuse_unless_resume(out, "a run", None, resume)
+    # Best by validation reconstruction ADE. No settings are compared on resume.
+    run = TrainingRun(out, resume, metric="val_recon_ade_m").refuse("a run", markers=(None,))
     started = time.perf_counter()
     # The data is read (and bad data refused) before --out exists.
     family = data_family(data)
     train, val = load_windows(data, features, config.val_fraction, config.max_windows_per_episode)
-    lock_out_dir(out)   # one writer per run directory (creates it)
+    run.lock()   # one writer per run directory (creates it)
     torch.manual_seed(config.seed)
     rng = np.random.default_rng(config.seed)
     model = TrafficModel(model_config, features.lane_chunks, features.chunk_points)
-    optimiser = torch.optim.Adam(model.parameters(), lr=config.lr)
+    optimizer = torch.optim.Adam(model.parameters(), lr=config.lr)
     meta = {"config": asdict(config), "model": model_config.to_dict(), "features": asdict(features),
             "data": [str(d) for d in data], **family, "train_scenes": len(train), "val_scenes": len(val)}
-    first_epoch, best, records, best_weights, best_sidecar = 0, float("inf"), [], None, None
-    state_path = out / "state.pt"
-    if resume and state_path.exists():
-        state = load_state(state_path)
-        model.load_state_dict(state["model"])
-        optimiser.load_state_dict(state["optimiser"])
-        first_epoch, best = state["epoch"] + 1, state["best"]
-        if "log" in state:
-            records, best_weights, best_sidecar = state["log"], state["best_model"], state["best_sidecar"]
-            rng.bit_generator.state = state["numpy_rng"]
-            torch.set_rng_state(state["torch_rng"])
-            # The files derived from the commit point, as it left them: a kill may have cut them
-            # off, or written those of an epoch that did not commit.
-            _write_log(out, records)
-            if best_weights is not None:
-                _save_best(out, model_config, features, best_weights, best_sidecar)
-        else:   # a state.pt of an older version: its log lines, a new draw of the data order
-            log = out / "log.jsonl"
-            lines = log.read_text().splitlines() if log.exists() else []
-            records = [r for r in map(json.loads, filter(str.strip, lines)) if r["epoch"] < first_epoch]
-            rng = np.random.default_rng([config.seed, first_epoch])
+    best_sidecar = None       # the best epoch's: its full validation metrics are in no log row
+    run.publishes(log=jsonl_log(), sidecar=lambda epoch: best_sidecar, kind=CHECKPOINT_KIND)
+    state = run.resume_from(model, optimizer)
+    if state is not None and "numpy_rng" in state:
+        best_sidecar = state["best_sidecar"]
+        rng.bit_generator.state = state["numpy_rng"]
+        # The files derived from the commit point, as it left them: a kill may have cut them
+        # off, or written those of an epoch that did not commit.
+        run.republish(model)
+    elif state is not None:   # a state.pt of an older version: its log lines, a new draw of the data order
+        log = out / "log.jsonl"
+        lines = log.read_text().splitlines() if log.exists() else []
+        run.log = [r for r in map(json.loads, filter(str.strip, lines)) if r["epoch"] < run.first_epoch]
+        rng = np.random.default_rng([config.seed, run.first_epoch])
     write_json(out / "run.json", meta)
-    for epoch in range(first_epoch, config.epochs):
+    for epoch in range(run.first_epoch, config.epochs):
         model.train()
         losses = []
         for batch in _batches(train, config.batch_size, rng):
             loss, parts = training_loss(model, batch, config.kl_weight, config.free_bits,
                                         config.prior_collision_weight, config.prior_off_road_weight)
-            optimiser.zero_grad()
+            optimizer.zero_grad()
             loss.backward()
             torch.nn.utils.clip_grad_norm_(model.parameters(), 5.0)
-            optimiser.step()
+            optimizer.step()
             losses.append(parts)
         metrics = evaluate_model(model, val or train[:64], samples=1, seed=epoch)
         record = {"epoch": epoch, "train_recon": float(np.mean([p["recon"] for p in losses])),
@@ -467,24 +446,16 @@ def train_traffic(data: list[Path], out: Path, config: TrainTrafficConfig = Trai
                   "elapsed_s": round(time.perf_counter() - started, 1)}
         if progress:
             print(json.dumps(record), flush=True)
-        improved = metrics["recon_ade_m"] < best
-        if improved:
-            best = metrics["recon_ade_m"]
-            best_weights = {k: v.detach().clone() for k, v in model.state_dict().items()}
+        if run.better(record):
             best_sidecar = {**meta, "epoch": epoch, "val": metrics}
-        records = records + [record]
-        # The commit point of the epoch: one file with all that resume needs (the log and the
-        # best weights too); log.jsonl and best.* are derived from it, after it.
-        state = {"model": model.state_dict(), "optimiser": optimiser.state_dict(), "epoch": epoch,
-                 "best": best, "numpy_rng": rng.bit_generator.state, "torch_rng": torch.get_rng_state(),
-                 "log": records, "best_model": best_weights, "best_sidecar": best_sidecar}
-        save_state(state_path, state)
-        _write_log(out, records)
-        if improved:
-            _save_best(out, model_config, features, best_weights, best_sidecar)
+        # The commit point of the epoch: one file with all that resume needs (the log, the data
+        # order's generator and the best epoch's sidecar too); log.jsonl and best.* are derived
+        # from it, after it.
+        run.commit(model, optimizer, record,
+                   extra={"numpy_rng": rng.bit_generator.state, "best_sidecar": best_sidecar})
     model, _, _ = load_traffic_model(out / "best")
     final = evaluate_model(model, val or train[:64], samples=5, seed=config.seed)
-    summary = {**meta, "best_val_recon_ade_m": best, "val": final,
+    summary = {**meta, "best_val_recon_ade_m": run.best_value, "val": final,
                "elapsed_s": round(time.perf_counter() - started, 1)}
     write_json(out / "summary.json", summary)
     return summary

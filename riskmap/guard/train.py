@@ -6,9 +6,9 @@ the whole validation, seen-test and unseen-test splits are scored in one pass ea
 the whole split, not averaged per batch). The best epoch's alert threshold is chosen on the
 validation decision frames for the target alert ratio (`riskmap.guard.threshold`; the paper's
 0.6 when the data holds no frames) and written to the sidecar with the metrics at it. Run directory: state.pt (everything --resume needs, written whole after every epoch: the
-epoch's one commit point), then from it history.json and, when the epoch is the best so far,
-best.safetensors + best.json (a resumed run writes them again from its state: the kill may have
-come between them); at the end curves.png and result.json.
+epoch's one commit point, `riskmap.infra.training_run`), then from it history.json and, when the
+epoch is the best so far, best.safetensors + best.json (a resumed run writes them again from its
+state: the kill may have come between them); at the end curves.png and result.json.
 """
 
 from __future__ import annotations
@@ -21,15 +21,13 @@ import numpy as np
 import torch
 from torch import nn
 
-from rasterize.errors import InputError
 from riskmap.guard.config import GuardTrainConfig
 from riskmap.guard.dataset import load_frames, load_split
 from riskmap.guard.metrics import binary_metrics
 from riskmap.guard.tgat import TGAT
 from riskmap.guard.threshold import alert_ratio, frame_max_scores, threshold_for_ratio
 from riskmap.infra.atomic import write_json
-from riskmap.infra.checkpoint import load_state, save_checkpoint, save_state
-from riskmap.infra.rundir import lock_out_dir, refuse_unless_resume
+from riskmap.infra.training_run import TrainingRun, json_log
 
 CHECKPOINT_KIND = "guard_tgat"
 ALERT_THRESHOLD = 0.6     # the paper's online threshold: used when the data holds no decision frames
@@ -92,42 +90,34 @@ def training_loss(model: nn.Module, batch: list[torch.Tensor], ttc_weight: float
 def train(data: Path, out: Path, config: GuardTrainConfig = GuardTrainConfig(), resume: bool = False,
           progress: bool = True) -> dict:
     out = Path(out)
-    state_path = out / "state.pt"
-    refuse_unless_resume(out, "a guard training run", "state.pt", resume)
+    # Best by validation AP; more epochs (or patience) may be asked for on resume, nothing else.
+    run = TrainingRun(out, resume, metric=lambda row: row["val"]["ap"], higher=True,
+                      settings=asdict(config), may_change=("epochs", "patience"),
+                      fix="choose another --out").refuse("a guard training run")
     torch.manual_seed(config.seed)
     # The data is read (and bad data refused) before --out exists.
     horizon_s = config.model.horizon_s
     splits = {name: _tensors(load_split(data, name, horizon_s)) for name in ("train", "val", "seen", "unseen")}
     val_frames = load_frames(data, "val")
-    lock_out_dir(out)   # one writer per run directory (creates it)
+    run.lock()   # one writer per run directory (creates it)
     model = TGAT(config.model)
-    optimiser = torch.optim.Adam(model.parameters(), lr=config.lr)
-    history, best, epoch0 = [], {"val_ap": -1.0, "epoch": None}, 0
+    optimizer = torch.optim.Adam(model.parameters(), lr=config.lr)
 
-    def publish(epoch: int, history: list[dict], best: dict) -> None:
-        """The files derived from the state committed after `epoch`."""
-        if best["epoch"] == epoch:
-            threshold, source, ratio = choose_threshold(model, val_frames, config.alert_ratio)
-            save_checkpoint(out / "best.safetensors", model, {
-                "kind": CHECKPOINT_KIND, "model": config.model.to_dict(), "train": asdict(config),
+    def best_sidecar(epoch: int) -> dict:
+        """The best checkpoint's sidecar (`epoch` the best so far): its alert threshold and the
+        metrics at it."""
+        threshold, source, ratio = choose_threshold(model, val_frames, config.alert_ratio)
+        return {"kind": CHECKPOINT_KIND, "model": config.model.to_dict(), "train": asdict(config),
                 "horizon_s": horizon_s, "alert_threshold": threshold, "alert_threshold_source": source,
                 "validation_alert_ratio": ratio, "data": str(data), "epoch": epoch,
-                "metrics": {k: evaluate(model, splits[k], threshold) for k in ("val", "seen", "unseen")}})
-        write_json(out / "history.json", history)
+                "metrics": {k: evaluate(model, splits[k], threshold) for k in ("val", "seen", "unseen")}}
 
-    if resume and state_path.exists():
-        state = load_state(state_path)
-        # More epochs (or patience) may be asked for on resume; everything else must match.
-        if state["config"] | {"epochs": config.epochs, "patience": config.patience} != asdict(config):
-            raise InputError(f"--out {out} was trained with other settings; choose another --out")
-        model.load_state_dict(state["model"])
-        optimiser.load_state_dict(state["optimiser"])
-        torch.set_rng_state(state["rng"])
-        history, best, epoch0 = state["history"], state["best"], state["epoch"] + 1
-        publish(state["epoch"], history, best)
+    run.resume_from(model, optimizer)
+    run.publishes(log=json_log("history.json"), sidecar=best_sidecar, kind=CHECKPOINT_KIND)
+    run.republish(model)     # the run may have been killed between the commit and its files
     n_train = len(splits["train"][0])
-    for epoch in range(epoch0, config.epochs):
-        if epoch - (best["epoch"] if best["epoch"] is not None else -1) > config.patience:
+    for epoch in range(run.first_epoch, config.epochs):
+        if epoch - (run.best_epoch if run.best_epoch is not None else -1) > config.patience:
             break
         model.train()
         order = torch.randperm(n_train)
@@ -135,27 +125,21 @@ def train(data: Path, out: Path, config: GuardTrainConfig = GuardTrainConfig(), 
         for start in range(0, n_train, config.batch_size):
             idx = order[start:start + config.batch_size]
             loss = training_loss(model, [t[idx] for t in splits["train"]], config.ttc_weight)
-            optimiser.zero_grad()
+            optimizer.zero_grad()
             loss.backward()
-            optimiser.step()
+            optimizer.step()
             losses.append(float(loss.detach()))
         row = {"epoch": epoch, "train_loss": float(np.mean(losses))}
         row.update({name: evaluate(model, splits[name]) for name in ("val", "seen", "unseen")})
-        history.append(row)
-        if row["val"]["ap"] > best["val_ap"]:
-            best = {"val_ap": row["val"]["ap"], "epoch": epoch}
-        save_state(state_path, {"config": asdict(config), "model": model.state_dict(),
-                                "optimiser": optimiser.state_dict(), "rng": torch.get_rng_state(),
-                                "history": history, "best": best, "epoch": epoch})
-        publish(epoch, history, best)
+        run.commit(model, optimizer, row)
         if progress:
             print(f"epoch {epoch}: loss {row['train_loss']:.4f} val AP {row['val']['ap']:.3f} "
                   f"seen AP {row['seen']['ap']:.3f} unseen AP {row['unseen']['ap']:.3f}", flush=True)
     from riskmap.guard.figures import save_training_curves
 
-    save_training_curves(history, out / "curves.png")
+    save_training_curves(run.log, out / "curves.png")
     sidecar = json.loads((out / "best.json").read_text())
-    result = {"best_epoch": best["epoch"], "test": {"seen": sidecar["metrics"]["seen"],
+    result = {"best_epoch": run.best_epoch, "test": {"seen": sidecar["metrics"]["seen"],
                                                     "unseen": sidecar["metrics"]["unseen"]},
               "val": sidecar["metrics"]["val"], "alert_threshold": sidecar["alert_threshold"],
               "alert_threshold_source": sidecar["alert_threshold_source"],

@@ -3,7 +3,7 @@
 Every epoch: a pass over the training episodes in a seeded order, then validation on held-out
 episodes (demonstration NLL under the policy; ADE/FDE of the sampled plan against the recorded
 future on a fixed subset). Writes RUN/state.pt (everything --resume needs, the epoch's one commit
-point: `riskmap.training.progress`), then from it RUN/log.csv, RUN/last.* and RUN/best.* (lowest
+point: `riskmap.infra.training_run`), then from it RUN/log.csv, RUN/last.* and RUN/best.* (lowest
 validation ADE); TensorBoard scalars in RUN/tb/.
 
 Windows served as recorded (validation, and training windows whose ego this epoch leaves
@@ -32,9 +32,9 @@ from rasterize.raster import channels
 from riskmap.data.dataset import DemoDataset, PerturbedEgo, collected_raster_config
 from riskmap.data.groups import dataset_groups, match_groups, natural_key
 from riskmap.data.sample_cache import open_sample_cache
-from riskmap.infra.checkpoint import CHECKPOINT_KIND, save_checkpoint
+from riskmap.infra.checkpoint import CHECKPOINT_KIND
 from riskmap.infra.config_mapping import to_plain
-from riskmap.infra.rundir import lock_out_dir
+from riskmap.infra.training_run import STATE, TrainingRun, csv_log, read_checkpoint_run
 from riskmap.planner.irl import demo_negative_log_likelihood, irl_step
 from riskmap.planner.model import (
     ModelConfig,
@@ -46,13 +46,6 @@ from riskmap.planner.model import (
 )
 from riskmap.planner.sampler import SamplerConfig, sample_trajectory
 from riskmap.training.config import TrainConfig
-from riskmap.training.progress import (
-    commit,
-    read_progress,
-    refuse_unless_resume_run,
-    restore,
-    write_log,
-)
 
 
 def resolve_device(name: str) -> torch.device:
@@ -272,6 +265,18 @@ def same_settings(saved: dict, config) -> bool:
     return defaults | saved | free == current
 
 
+def training_run(out: Path, config, resume: bool, kind: str) -> TrainingRun:
+    """The run of `riskmap train` or `train-baseline` in `out` (`riskmap.infra.training_run`),
+    refused without `resume` when the folder holds one (its state, or the last checkpoint of a
+    run begun before state.pt, which it then resumes from): best by validation ADE, resumed only
+    with `config`'s settings but for `RESUMABLE_CHANGES`."""
+    run = TrainingRun(out, resume, metric="val_ade_m", best={"val_ade_m": math.inf},
+                      settings=to_plain(config), same=lambda saved: same_settings(saved, config),
+                      fix="resume with the same flags (only --epochs may change) or choose another --out",
+                      older=lambda: read_checkpoint_run(out, kind))
+    return run.refuse(markers=(STATE, "last.json"))
+
+
 def _init_from(model: RiskMapGenerator, model_config: ModelConfig, checkpoint: Path) -> None:
     """Start from a trained risk-map checkpoint's weights (fine-tuning); its network must be the
     one this run builds (grid resolution, raster channels), except that a raster with more
@@ -312,7 +317,7 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True, on_e
     from tqdm import tqdm
 
     out = Path(config.out)
-    refuse_unless_resume_run(out, resume)
+    run = training_run(out, config, resume, CHECKPOINT_KIND)
     device = resolve_device(config.device)
     torch.manual_seed(config.seed)
     dataset = DemoDataset(config.data, config.resolution,
@@ -352,18 +357,11 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True, on_e
         model.to(memory_format=torch.channels_last)
     trained_parameters = model.timing.parameters() if config.freeze_risk else model.parameters()
     optimizer = torch.optim.Adam(trained_parameters, lr=config.lr)
-    start_epoch, best, rows = 0, {"val_ade_m": math.inf}, []
-    state = read_progress(out, CHECKPOINT_KIND) if resume else None
-    if state is not None:
-        if not same_settings(state["train"], config):
-            raise InputError(f"--out {out} was trained with other settings; resume with the same "
-                             "flags (only --epochs may change) or choose another --out")
-        restore(state, model, optimizer)
-        start_epoch, best, rows = state["epoch"] + 1, state["best"], state["log"]
-    lock_out_dir(out)   # one writer per run directory (creates it)
+    run.resume_from(model, optimizer)
+    run.lock()   # one writer per run directory (creates it)
     attach_sample_cache(dataset, config, out, progress)
     data = dataset_sidecar(dataset, train_idx, val_idx)
-    writer = SummaryWriter(str(out / "tb"), purge_step=start_epoch)
+    writer = SummaryWriter(str(out / "tb"), purge_step=run.first_epoch)
     workers = sample_workers(config.workers, device)
     val_loader = _loader(Subset(dataset, val_idx), config.batch_size, workers)
     fields = ["epoch", "train_loss", "train_nll", "val_nll", "val_ade_m", "val_fde_m", "seconds"]
@@ -371,20 +369,17 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True, on_e
         fields[3:3] = ["train_timing"]
         fields[-1:-1] = ["val_timing_m"]
 
-    def publish(epoch: int, rows: list[dict], best: dict) -> None:
-        """The files derived from the state committed after `epoch`."""
-        write_log(out / "log.csv", fields, rows)
-        metrics = {k: v for k, v in rows[-1].items() if k != "epoch"}
-        sidecar = _sidecar(config, model_config, dataset, irl, data, metrics, epoch) | {"best": best}
+    def sidecar(epoch: int) -> dict:
+        """The checkpoints' sidecar after `epoch`, the last committed one."""
+        metrics = {k: v for k, v in run.log[-1].items() if k != "epoch"}
+        side = _sidecar(config, model_config, dataset, irl, data, metrics, epoch) | {"best": run.best}
         if spacetime:
-            sidecar |= st_train.sidecar_extra(st, reach)
-        if best.get("epoch") == epoch:
-            save_checkpoint(out / "best", model, sidecar)
-        save_checkpoint(out / "last", model, sidecar)
+            side |= st_train.sidecar_extra(st, reach)
+        return side
 
-    if state is not None:
-        publish(state["epoch"], rows, best)     # the run may have been killed between them
-    for epoch in range(start_epoch, config.epochs):
+    run.publishes(log=csv_log(fields), sidecar=sidecar, kind=CHECKPOINT_KIND, last=True)
+    run.republish(model)     # the run may have been killed between the commit and its files
+    for epoch in range(run.first_epoch, config.epochs):
         started = time.perf_counter()
         model.train()
         if config.freeze_risk:          # the risk network's batch norms keep their statistics
@@ -439,13 +434,9 @@ def train(config: TrainConfig, resume: bool = False, progress: bool = True, on_e
         for key, value in metrics.items():
             writer.add_scalar(key, value, epoch)
         writer.flush()   # on disk before the commit: a resumed run purges only later epochs
-        rows = rows + [{"epoch": epoch, **metrics}]
-        if metrics["val_ade_m"] < best["val_ade_m"]:
-            best = {"epoch": epoch, **metrics}
-        commit(out, model, optimizer, epoch, best, rows, to_plain(config))
-        publish(epoch, rows, best)
+        run.commit(model, optimizer, {"epoch": epoch, **metrics})
         if progress:
             print(f"epoch {epoch + 1}/{config.epochs}: " +
                   ", ".join(f"{k} {v:.3f}" for k, v in metrics.items()), flush=True)
     writer.close()
-    return best
+    return run.best

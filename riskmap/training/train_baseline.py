@@ -3,13 +3,12 @@
 Same demonstrations, same episode split (`riskmap.training.train.split_episodes`) and the same ego-pose
 augmentation as the risk-map planner's training; the loss is the mean L2 distance between the
 predicted and the recorded 12 waypoints (ADE). Writes RUN/state.pt (everything --resume needs,
-the epoch's one commit point: `riskmap.training.progress`), then from it RUN/log.csv, RUN/last.*
+the epoch's one commit point: `riskmap.infra.training_run`), then from it RUN/log.csv, RUN/last.*
 and RUN/best.* (lowest validation ADE).
 """
 
 from __future__ import annotations
 
-import math
 import time
 from dataclasses import asdict
 from pathlib import Path
@@ -18,28 +17,18 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader, Dataset, Subset
 
-from rasterize.errors import InputError
 from rasterize.frames import ego_from_world, ego_pose
 from rasterize.raster import channels
 from riskmap.data.dataset import DemoDataset, PerturbedEgo
-from riskmap.infra.checkpoint import save_checkpoint
-from riskmap.infra.config_mapping import to_plain
-from riskmap.infra.rundir import lock_out_dir
+from riskmap.infra.training_run import csv_log
 from riskmap.planner.bc import CHECKPOINT_KIND, BCConfig, BCNet, bc_inputs
 from riskmap.training.config import BaselineTrainConfig
-from riskmap.training.progress import (
-    commit,
-    read_progress,
-    refuse_unless_resume_run,
-    restore,
-    write_log,
-)
 from riskmap.training.train import (
     dataset_sidecar,
     raster_for,
     resolve_goal_variance,
-    same_settings,
     split_episodes,
+    training_run,
 )
 
 
@@ -98,7 +87,7 @@ def train_baseline(config: BaselineTrainConfig, resume: bool = False, progress: 
     from tqdm import tqdm
 
     out = Path(config.out)
-    refuse_unless_resume_run(out, resume)
+    run = training_run(out, config, resume, CHECKPOINT_KIND)
     torch.manual_seed(config.seed)
     dataset = DemoDataset(config.data, raster=raster_for(config.data, config.predict_s))
     train_idx, val_idx = split_episodes(dataset, config.val_fraction, config.val_groups)
@@ -110,33 +99,22 @@ def train_baseline(config: BaselineTrainConfig, resume: bool = False, progress: 
                   goal_variance=resolve_goal_variance(None, dataset))
     model = BCNet(bc)
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr)
-    start_epoch, best, rows = 0, {"val_ade_m": math.inf}, []
-    state = read_progress(out, CHECKPOINT_KIND) if resume else None
-    if state is not None:
-        if not same_settings(state["train"], config):
-            raise InputError(f"--out {out} was trained with other settings; resume with the same "
-                             "flags (only --epochs may change) or choose another --out")
-        restore(state, model, optimizer)
-        start_epoch, best, rows = state["epoch"] + 1, state["best"], state["log"]
-    lock_out_dir(out)   # one writer per run directory (creates it)
+    run.resume_from(model, optimizer)
+    run.lock()   # one writer per run directory (creates it)
     data = dataset_sidecar(dataset, train_idx, val_idx)
     augment = (config.augment_probability, config.augment_heading_deg, config.augment_lateral_m)
     train_set = BCWindows(dataset, bc, augment, config.seed)
     val_loader = DataLoader(Subset(BCWindows(dataset, bc, None), val_idx), batch_size=config.batch_size)
     fields = ["epoch", "train_ade_m", "val_ade_m", "val_fde_m", "seconds"]
 
-    def publish(epoch: int, rows: list[dict], best: dict) -> None:
-        """The files derived from the state committed after `epoch`."""
-        write_log(out / "log.csv", fields, rows)
-        metrics = {k: v for k, v in rows[-1].items() if k != "epoch"}
-        sidecar = _sidecar(config, bc, dataset, data, metrics, epoch, best)
-        if best.get("epoch") == epoch:
-            save_checkpoint(out / "best", model, sidecar, kind=CHECKPOINT_KIND)
-        save_checkpoint(out / "last", model, sidecar, kind=CHECKPOINT_KIND)
+    def sidecar(epoch: int) -> dict:
+        """The checkpoints' sidecar after `epoch`, the last committed one."""
+        metrics = {k: v for k, v in run.log[-1].items() if k != "epoch"}
+        return _sidecar(config, bc, dataset, data, metrics, epoch, run.best)
 
-    if state is not None:
-        publish(state["epoch"], rows, best)     # the run may have been killed between them
-    for epoch in range(start_epoch, config.epochs):
+    run.publishes(log=csv_log(fields), sidecar=sidecar, kind=CHECKPOINT_KIND, last=True)
+    run.republish(model)     # the run may have been killed between the commit and its files
+    for epoch in range(run.first_epoch, config.epochs):
         started = time.perf_counter()
         model.train()
         train_set.set_epoch(epoch)
@@ -156,12 +134,8 @@ def train_baseline(config: BaselineTrainConfig, resume: bool = False, progress: 
             bar.set_postfix(ade=f"{np.mean(losses):.2f}")
         metrics = {"train_ade_m": float(np.mean(losses)), **_validate(model, val_loader)}
         metrics["seconds"] = round(time.perf_counter() - started, 1)
-        rows = rows + [{"epoch": epoch, **metrics}]
-        if metrics["val_ade_m"] < best["val_ade_m"]:
-            best = {"epoch": epoch, **metrics}
-        commit(out, model, optimizer, epoch, best, rows, to_plain(config))
-        publish(epoch, rows, best)
+        run.commit(model, optimizer, {"epoch": epoch, **metrics})
         if progress:
             print(f"{config.kind} epoch {epoch + 1}/{config.epochs}: " +
                   ", ".join(f"{k} {v:.3f}" for k, v in metrics.items()), flush=True)
-    return best
+    return run.best

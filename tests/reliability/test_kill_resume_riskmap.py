@@ -14,7 +14,7 @@ Findings fixed (command, kill point: symptom -> cause -> fix):
   of one epoch with the optimizer and progress of another) -> RUN/state.pt holds weights,
   optimizer, random state, epoch, best and log rows, written whole once per epoch (the commit);
   log.csv, best.* and last.* are written from it after it and again on resume
-  (riskmap/training/progress.py).
+  (riskmap/infra/training_run.py).
 - guard train (right after the final epoch's state.pt): history.json lacked the last epoch ->
   it was written after state.pt, and a resumed run with no epoch left never wrote it again; best.*
   was written before the commit -> history.json and best.* are written from the committed state
