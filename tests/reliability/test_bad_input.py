@@ -592,6 +592,7 @@ ATTACK = ("adversary", "attack")
 GUARD_DATA = ("adversary", "guard-data")
 TRAFFIC = ("adversary", "train-traffic")
 HARDEN = ("adversary", "harden")
+EXPORT = ("adversary", "export")
 
 
 def R(id, argv, names, **kw):
@@ -1203,6 +1204,21 @@ add(
 AR = lambda variant="good": (lambda fx, t: fx.attack_run(variant))
 
 
+def export_row(id, run, names, *extra, **kw):
+    return R(f"export/{id}", _argv(*EXPORT, "--run", run, "--format", kw.pop("format", "commonroad"),
+                                   "--quiet", *extra, "--out", kw.pop("out_arg", OUT)), names, **kw)
+
+
+add(
+    export_row("run-missing", missing("norun"), S(missing("norun"))),
+    export_row("run-empty-dir", lambda fx, t: fx.dir("empty_dir"), S(lambda fx, t: fx.dir("empty_dir"))),
+    export_row("run-truncated", AR("half_run"), S(AR("half_run"))),
+    export_row("format-unknown", AR(), S("--format"), format="opendrive", usage=True),
+    export_row("run-scenes-missing", AR(), S("no_scenes")),    # its run.json names a missing folder
+    export_row("scenes-flag-missing", AR(), S(missing("noscenes")), "--scenes", missing("noscenes")),
+)
+
+
 def gdata_row(id, attacks, names, *extra, **kw):
     return R(f"guard-data/{id}", _argv(*GUARD_DATA, "--attacks", attacks, "--quiet", *extra, "--out",
                                        kw.pop("out_arg", OUT)), names, **kw)
@@ -1368,4 +1384,5 @@ def test_every_command_has_rows():
     assert commands >= {
         "collect", "train", "train-baseline", "drive", "check-planner", "evaluate", "tune-goal-variance", "figures-scenes",
         "figures-plans", "guard-collect", "guard-train", "guard-evaluate", "stress-test", "report", "search",
-        "search-report", "train-selector", "scenes", "attack", "guard-data", "train-traffic", "harden"}
+        "search-report", "train-selector", "scenes", "attack", "guard-data", "train-traffic", "harden",
+        "export"}
