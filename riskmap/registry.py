@@ -37,6 +37,10 @@ from riskmap.sim.plan import HumanDriver
 PLUGIN_GROUP = "riskmap.planners"
 SPECS = ("idm", "yielding", "cv", "replay", "riskmap:PATH", "cnn:PATH", "cnn_lstm:PATH", "rvsg:PATH",
          "guard:SPEC", "guard-always:SPEC", "py:module:Factory[?key=value&...]")
+# The one help text of every command-line flag that takes a planner SPEC.
+SPEC_HELP = ("planner SPEC: idm, yielding, cv, replay (recordings), riskmap:PATH, cnn:PATH, "
+             "cnn_lstm:PATH, rvsg:PATH, guard:SPEC, your own py:package.module:Factory[?key=value&...] "
+             "or an installed plug-in NAME:ARG (README, \"Your own planner\")")
 
 
 def make_planner(spec: str, seed: int = 0, goal_variance: float | None = None):

@@ -9,6 +9,7 @@ from pathlib import Path
 
 from adversary.crash.config import TrainSelectorConfig, TrainTrafficConfig
 from rasterize.timebase import REPLAN_HZ
+from riskmap.registry import SPEC_HELP
 from riskmap.infra.cli import (
     add_config_options,
     config_from_args,
@@ -176,7 +177,7 @@ def add_attack_parsers(subparsers) -> None:
     p.set_defaults(func=_run_scenes)
 
     p = subparsers.add_parser("attack", help="CRASH / distance-based attacks on recorded scenes")
-    p.add_argument("--planner", required=True, help="the ego under test: replay, idm, riskmap:CKPT, guarded:...")
+    p.add_argument("--planner", required=True, help="the ego under test, a " + SPEC_HELP)
     p.add_argument("--scenes", required=True, help="a directory from `adversary scenes`")
     p.add_argument("--count", type=positive_int, required=True)
     p.add_argument("--selector", choices=SELECTORS, default="crash")

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from rasterize.errors import InputError
 from riskmap.infra.cli import add_config_options, config_from_args, positive_int
+from riskmap.registry import SPEC_HELP
 
 
 def _print_summary(summary: dict, out: str) -> None:
@@ -54,7 +55,7 @@ def add_parsers(subparsers) -> None:
                                              "collides")
     add_config_options(
         p, SearchConfig, "planner", "template", "algorithm", "pop", "gen", "seed", "episode_s", "workers",
-        help={"planner": "planner SPEC: idm, cv, riskmap:PATH", "pop": "evaluations per generation",
+        help={"planner": SPEC_HELP, "pop": "evaluations per generation",
               "gen": "generations", "episode_s": "simulated seconds per evaluation",
               "workers": "evaluation processes"},
         option_types={"pop": positive_int, "gen": positive_int, "workers": positive_int},

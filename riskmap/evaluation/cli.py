@@ -9,6 +9,7 @@ from pathlib import Path
 from rasterize.errors import InputError
 from rasterize.timebase import REPLAN_HZ
 from riskmap.infra.cli import comma_list, positive_float, positive_int
+from riskmap.registry import SPEC_HELP
 
 
 def _cmd_drive(args: argparse.Namespace) -> int:
@@ -110,7 +111,7 @@ def _cmd_tune_goal_variance(args: argparse.Namespace) -> int:
 def add_parsers(sub) -> None:
     p = sub.add_parser("drive", help="drive closed-loop episodes with a planner")
     p.add_argument("--checkpoint", help="risk-map planner checkpoint (same as --planner riskmap:CKPT)")
-    p.add_argument("--planner", help="planner SPEC: idm, cv or riskmap:PATH")
+    p.add_argument("--planner", help=SPEC_HELP)
     p.add_argument("--env", required=True)
     p.add_argument("--episodes", type=positive_int, required=True)
     p.add_argument("--seed", type=int, default=0)
@@ -125,7 +126,7 @@ def add_parsers(sub) -> None:
 
     p = sub.add_parser("check-planner", help="drive a planner on a few scenes of each family and "
                        "say, one line each, where it breaks the planner contract")
-    p.add_argument("spec", help="planner SPEC, e.g. py:package.module:Factory or riskmap:PATH")
+    p.add_argument("spec", help=SPEC_HELP)
     p.add_argument("--envs", type=comma_list, default=("highway-v0", "merge-v0", "roundabout-v0",
                                                       "intersection-v0"),
                    help="comma-separated highway-env ids (default: one of each family)")
@@ -136,9 +137,7 @@ def add_parsers(sub) -> None:
     p.set_defaults(func=_cmd_check_planner)
 
     p = sub.add_parser("evaluate", help="closed-loop benchmark of planners (Table I metrics)")
-    p.add_argument("--planners", required=True,
-                   help="comma-separated planner SPECs: idm, replay, cv, riskmap:PATH, cnn:PATH, "
-                        "cnn_lstm:PATH, rvsg:PATH")
+    p.add_argument("--planners", required=True, help="comma-separated; each a " + SPEC_HELP)
     p.add_argument("--env", help="highway-env id (simulated scenes)")
     p.add_argument("--episodes", type=positive_int, help="episodes (simulated scenes)")
     p.add_argument("--max-episodes", type=positive_int, default=None,
