@@ -1,9 +1,14 @@
 """The risk-aware planner: demonstrations, dataset, risk-map generator, value iteration, IRL
 training, sampler, planner and closed-loop driving. Heavy modules (torch) load on first use."""
 
+# name: the module that defines it (tests/riskmap/test_public_names.py imports every one)
 _LAZY = {
-    "RiskMapPlanner": "riskmap.planner.riskmap_planner", "Plan": "riskmap.planner.riskmap_planner", "Planner": "riskmap.planner.riskmap_planner",
+    "Plan": "riskmap.sim.plan", "Planner": "riskmap.sim.plan", "PLAN_STEPS": "riskmap.sim.plan",
+    "PLAN_DT_S": "riskmap.sim.plan",
+    "RiskMapPlanner": "riskmap.planner.riskmap_planner", "load_planner": "riskmap.planner.riskmap_planner",
+    "SpaceTimePlanner": "riskmap.planner.st_planner",
     "DemoDataset": "riskmap.data.dataset", "make_planner": "riskmap.registry",
+    "make_env": "riskmap.sim.episode", "drive_episode": "riskmap.sim.rollout",
     "soft_value_iteration": "riskmap.planner.vi", "state_visitation": "riskmap.planner.vi",
 }
 
