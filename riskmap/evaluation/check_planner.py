@@ -34,6 +34,10 @@ class CheckConfig:
     episode_s: float = 8.0        # seconds driven per episode
     seed: int = 0
     determinism_scenes: int = 3   # scenes planned again by fresh planners
+    # CommonRoad recordings (files or folders) to drive instead of the highway-env families: the
+    # first `episodes` recorded vehicles of each file, handed to the planner as in
+    # `evaluate --commonroad` (log mode, the route rule's goal), each to the end of its record.
+    recordings: tuple[str, ...] = ()
 
 
 @dataclass
@@ -164,10 +168,40 @@ def _determinism(spec: str, config: CheckConfig, scenes: list, findings: Finding
                          f"{env_id} at {scene.time_s:.1f} s")
 
 
+def _drive_recordings(planner, config: CheckConfig, findings: Findings, scenes: list,
+                      progress: bool) -> None:
+    """The first `config.episodes` recorded vehicles of each recording, driven by the checked
+    planner among the others replayed (`riskmap evaluate --commonroad`'s episode)."""
+    from riskmap.data.collect_commonroad import (
+        CommonRoadCollectConfig,
+        scenario_files,
+        unique_demonstrators,
+    )
+    from riskmap.sim.commonroad_replay import replay_commonroad_episode, route_scene_config
+
+    files = scenario_files(list(config.recordings), flag="--commonroad")
+    demos, traffics, _ = unique_demonstrators(files, CommonRoadCollectConfig(files=(), smoothing_s=0.0))
+    taken: Counter = Counter()
+    for demo in demos:
+        if taken[demo.path] >= config.episodes:
+            continue
+        taken[demo.path] += 1
+        traffic = traffics[demo.path]
+        name = f"{traffic.name} vehicle {int(traffic.ids[demo.agent])}"
+        checking = _Checking(planner, findings, name)
+        # what the planner sees is the planner's own route rule, not the checking wrapper's
+        replay_commonroad_episode(traffic, int(traffic.ids[demo.agent]), checking,
+                                  scene_config=route_scene_config(planner))
+        scenes.extend((name, scene) for scene in checking.scenes[1:2])
+        if progress:
+            print(f"  {name}: {findings.plans} plans checked so far", flush=True)
+
+
 def check_planner(spec: str, config: CheckConfig = CheckConfig(), progress: bool = False,
                   planner=None) -> Findings:
     """Drive `spec` (`planner`, when already made from it with `config.seed`) on
-    `config.episodes` short episodes of each family; the breaches found."""
+    `config.episodes` short episodes of each family (or recorded vehicles of each of
+    `config.recordings`); the breaches found."""
     from riskmap.registry import make_planner
     from riskmap.sim.episode import cached_env
     from riskmap.sim.plan import drives_itself
@@ -178,7 +212,9 @@ def check_planner(spec: str, config: CheckConfig = CheckConfig(), progress: bool
     if drives_itself(planner):
         return findings            # the world's own IDM/MOBIL ego: no plans to check
     scenes = []
-    for env_id in config.envs:
+    if config.recordings:
+        _drive_recordings(planner, config, findings, scenes, progress)
+    for env_id in (() if config.recordings else config.envs):
         drive = DriveConfig(env_id=env_id, episodes=config.episodes, seed=config.seed,
                             episode_s=config.episode_s)
         for episode in range(config.episodes):

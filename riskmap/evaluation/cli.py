@@ -70,10 +70,14 @@ def _cmd_check_planner(args: argparse.Namespace) -> int:
     from riskmap.registry import make_planner
 
     config = CheckConfig(envs=args.envs, episodes=args.episodes, episode_s=args.seconds,
-                         seed=args.seed)
+                         seed=args.seed, recordings=tuple(args.commonroad or ()))
     planner = make_planner(args.spec, seed=args.seed)     # a bad SPEC: one line, before anything
-    print(f"checking {args.spec} on {', '.join(config.envs)} ({config.episodes} episode(s) of "
-          f"{config.episode_s:g} s each)", flush=True)
+    if config.recordings:
+        print(f"checking {args.spec} on {config.episodes} recorded vehicle(s) of each recording "
+              f"in {', '.join(config.recordings)}", flush=True)
+    else:
+        print(f"checking {args.spec} on {', '.join(config.envs)} ({config.episodes} episode(s) of "
+              f"{config.episode_s:g} s each)", flush=True)
     findings = check_planner(args.spec, config, progress=not args.quiet, planner=planner)
     if findings.times_s:
         times = 1000 * np.asarray(findings.times_s)
@@ -130,8 +134,14 @@ def add_parsers(sub) -> None:
     p.add_argument("--envs", type=comma_list, default=("highway-v0", "merge-v0", "roundabout-v0",
                                                       "intersection-v0"),
                    help="comma-separated highway-env ids (default: one of each family)")
-    p.add_argument("--episodes", type=positive_int, default=1, help="episodes per family")
-    p.add_argument("--seconds", type=positive_float, default=8.0, help="seconds driven per episode")
+    p.add_argument("--commonroad", nargs="+", metavar="DIR_OR_FILE",
+                   help="check on CommonRoad recordings instead of the highway-env families: "
+                        "--episodes recorded vehicles of each file, driven as evaluate --commonroad "
+                        "drives them (to the end of their record)")
+    p.add_argument("--episodes", type=positive_int, default=1,
+                   help="episodes per family (with --commonroad: recorded vehicles per file)")
+    p.add_argument("--seconds", type=positive_float, default=8.0,
+                   help="seconds driven per highway-env episode")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--quiet", action="store_true")
     p.set_defaults(func=_cmd_check_planner)

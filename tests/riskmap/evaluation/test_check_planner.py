@@ -56,3 +56,17 @@ def test_plan_problems_units():
     assert "imply" in plan_problems(Plan(sprint), speed=10.0)[0]
     stopped = np.zeros((12, 2))
     assert plan_problems(Plan(stopped), speed=0.0) == []
+
+
+FIXTURES = __import__("pathlib").Path(__file__).resolve().parents[2] / "fixtures" / "commonroad"
+
+
+def test_the_contract_is_checked_on_recordings_too(capsys):
+    """check-planner --commonroad: the planner drives recorded vehicles as evaluate --commonroad
+    drives them, and its breaches are named with the recording and vehicle."""
+    findings = check_planner(SPEC.format("world_frame"), CheckConfig(recordings=(str(FIXTURES),),
+                                                                     determinism_scenes=0))
+    assert findings.plans > 0 and any("not world coordinates" in line and "vehicle" in line
+                                      for line in findings.lines()), findings.lines()
+    assert main(["check-planner", "cv", "--commonroad", str(FIXTURES), "--quiet"]) == 0
+    assert "keeps the planner contract" in capsys.readouterr().out
