@@ -51,7 +51,7 @@ GAP_RADIUS_M = 40.0             # others farther (centre distance) do not count 
 SOLUTION_LATERAL_ACCELS_MPS2 = (-6.0, -3.0, 0.0, 2.0)
 # Box IoU, off-road and the collision classifier are defined in riskmap.sim.metrics; callers
 # keep importing them from here.
-__all__ = ["COLLISION_IOU", "COLLISION_TYPES", "OFF_ROAD_FRACTION", "Rollout", "box_iou", "braking_track",
+__all__ = ["COLLISION_IOU", "COLLISION_TYPES", "OFF_ROAD_FRACTION", "Rollout", "box_iou", "first_collision", "braking_track",
            "classify_collision", "drivable_area", "ego_future_2hz", "ego_track_2hz", "handover_offsets",
            "judge", "off_road_fraction", "rollout", "splice_tracks"]
 
@@ -263,20 +263,20 @@ def braking_track(record: SceneRecord, row: int, decel_mps2: float = 8.0, into_e
 
 # ---- metrics --------------------------------------------------------------------------------
 
-def _first_collision(result: Rollout, ego: int, others: list[int], from_step: int
-                     ) -> tuple[int | None, int | None, float]:
-    """(step, recorder agent, IoU) of the first step >= from_step at which the ego's box overlaps
-    one of `others` with IoU > COLLISION_IOU; (None, None, max IoU seen) if never."""
-    s, v = result.states, result.valid
-    reach = 0.5 * (np.hypot(*result.sizes[ego]) + np.hypot(result.sizes[:, 0], result.sizes[:, 1]))
+def first_collision(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, ego: int,
+                    others: list[int], from_step: int = 0) -> tuple[int | None, int | None, float]:
+    """(step, agent, IoU) of the first step >= from_step at which the ego's box overlaps one of
+    `others` with IoU > COLLISION_IOU; (None, None, max IoU seen) if never. Arrays as a
+    `Rollout`'s: states [N, S, 6], valid [N, S], sizes [N, 2]."""
+    reach = 0.5 * (np.hypot(*sizes[ego]) + np.hypot(sizes[:, 0], sizes[:, 1]))
     best = 0.0
-    for k in range(from_step, s.shape[1]):
-        if not v[ego, k]:
+    for k in range(from_step, states.shape[1]):
+        if not valid[ego, k]:
             continue
         hits = []
         for a in others:
-            if v[a, k] and np.linalg.norm(s[a, k, :2] - s[ego, k, :2]) < reach[a]:
-                iou = box_iou(s[ego, k], result.sizes[ego], s[a, k], result.sizes[a])
+            if valid[a, k] and np.linalg.norm(states[a, k, :2] - states[ego, k, :2]) < reach[a]:
+                iou = box_iou(states[ego, k], sizes[ego], states[a, k], sizes[a])
                 best = max(best, iou)
                 if iou > COLLISION_IOU:
                     hits.append((iou, a))
@@ -284,6 +284,12 @@ def _first_collision(result: Rollout, ego: int, others: list[int], from_step: in
             iou, a = max(hits)
             return k, a, iou
     return None, None, best
+
+
+def _first_collision(result: Rollout, ego: int, others: list[int], from_step: int
+                     ) -> tuple[int | None, int | None, float]:
+    """`first_collision` on a rollout's recorded arrays."""
+    return first_collision(result.states, result.valid, result.sizes, ego, others, from_step)
 
 
 def collided_with(result: Rollout, record: SceneRecord, row: int) -> bool:

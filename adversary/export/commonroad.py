@@ -138,22 +138,11 @@ def collision_step(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, ego
                    from_step: int = 0) -> tuple[int | None, float]:
     """(first step >= from_step at which the boxes of `ego` and `other` overlap with IoU >
     COLLISION_IOU, that IoU); (None, largest IoU seen) if never: the judge's criterion
-    (`riskmap.sim.metrics.box_iou`)."""
-    from adversary.crash.judge import COLLISION_IOU
-    from riskmap.sim.metrics import box_iou
+    (`adversary.crash.judge.first_collision`)."""
+    from adversary.crash.judge import first_collision
 
-    best = 0.0
-    reach = 0.5 * (np.hypot(*sizes[ego]) + np.hypot(*sizes[other]))
-    for k in range(from_step, states.shape[1]):
-        if not (valid[ego, k] and valid[other, k]):
-            continue
-        if np.linalg.norm(states[ego, k, :2] - states[other, k, :2]) >= reach:
-            continue
-        iou = box_iou(states[ego, k], sizes[ego], states[other, k], sizes[other])
-        if iou > COLLISION_IOU:
-            return k, iou
-        best = max(best, iou)
-    return None, best
+    step, _, iou = first_collision(states, valid, sizes, ego, [other], from_step)
+    return step, iou
 
 
 # ---- CommonRoad objects ------------------------------------------------------------------------

@@ -22,13 +22,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from adversary.crash.judge import WINDOW_FUTURE_S, WINDOW_HISTORY_S, _no_contact_response
+from adversary.crash.judge import WINDOW_FUTURE_S, WINDOW_HISTORY_S, _no_contact_response, first_collision
 from adversary.crash.scenes import CONTROL_HZ, WINDOW_DT_S
 from adversary.harden.windows import (
     NO_HISTORY,
     HardenWindowConfig,
     HardenWindows,
-    _first_collision_arrays,
     clear_alternative,
     window_steps,
     with_demonstrated_future,
@@ -76,7 +75,7 @@ def search_failure_windows(search_config: dict, values: np.ndarray,
     ego = recorder.ego_id
     dt = recorder.dt_s
     lanes = recorder.scene(recorder.num_steps - 1, 0.0, 0.0, source=ENV_ID).lanes
-    hit, target, _ = _first_collision_arrays(states, valid, sizes, ego, _others(sizes, ego), 0)
+    hit, target, _ = first_collision(states, valid, sizes, ego, _others(sizes, ego), 0)
     if hit is None:
         return HardenWindows((), {"windows": 0, "why": "the search's drive does not collide"})
     ego_full, info = clear_alternative(states, valid, sizes, ego, target, dt, lanes, config)
@@ -87,7 +86,7 @@ def search_failure_windows(search_config: dict, values: np.ndarray,
         return HardenWindows((), {**info, "windows": 0, "why": NO_HISTORY})
     _, again = _drive(search_config, values, wrap_planner=lambda _: _following(ego_full, sizes[ego], dt))
     states, valid, sizes, _ = again.arrays()
-    hit, _, _ = _first_collision_arrays(states, valid, sizes, again.ego_id, _others(sizes, again.ego_id), 0)
+    hit, _, _ = first_collision(states, valid, sizes, again.ego_id, _others(sizes, again.ego_id), 0)
     if hit is not None:
         return HardenWindows((), {**info, "windows": 0, "why": f"the alternative's drive collides at step {hit}"})
     scenes = tuple(with_demonstrated_future(again.scene(k, WINDOW_HISTORY_S, WINDOW_FUTURE_S, WINDOW_DT_S,

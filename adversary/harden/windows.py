@@ -35,6 +35,7 @@ from adversary.crash.judge import (
     WINDOW_FUTURE_S,
     WINDOW_HISTORY_S,
     _first_collision,
+    first_collision,
     drivable_area,
     rollout,
     splice_tracks,
@@ -122,7 +123,7 @@ def clear_alternative(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, 
     sizes [A, 2]; agent `ego` collided with agent `adversary` at or after `from_step`; `lanes`
     the road's): the collision-free ego [S + future, 6] from the drive's steps 0 ... S - 1 on, and
     how it was found, or (None, why); info["collision_step"] is absent only if they never touch."""
-    k_c, _, _ = _first_collision_arrays(states, valid, sizes, ego, [adversary], from_step)
+    k_c, _, _ = first_collision(states, valid, sizes, ego, [adversary], from_step)
     if k_c is None:
         return None, {"why": "the attacked drive no longer collides with the adversary"}
     end = states.shape[1] - 1
@@ -189,13 +190,6 @@ def constant_velocity(state: np.ndarray, steps: int, dt_s: float) -> np.ndarray:
     out[:, :2] = state[:2] + (state[4] * times)[:, None] * state[2:4]
     out[:, 5] = 0.0
     return out
-
-
-def _first_collision_arrays(states, valid, sizes, ego, others, from_step):
-    """`judge._first_collision` on bare arrays (no Rollout)."""
-    from types import SimpleNamespace
-
-    return _first_collision(SimpleNamespace(states=states, valid=valid, sizes=sizes), ego, others, from_step)
 
 
 NO_HISTORY = f"the collision comes before a window's {WINDOW_HISTORY_S:g} s of history"
