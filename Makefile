@@ -10,7 +10,7 @@ STAMP  := $(VENV)/.installed
 TORCH_PIN := torch==2.14.1 torchvision==0.29.1
 DEMO_OUT  ?= out/demo
 
-.PHONY: setup test test-faults test-cluster demo bench clean
+.PHONY: setup test test-faults test-cluster test-commonroad-oldest demo bench clean
 
 setup: $(STAMP)
 
@@ -35,6 +35,26 @@ test-faults: $(STAMP)
 # lines naming the lost node and the retried jobs are printed).
 test-cluster: $(STAMP)
 	$(BIN)/python -m pytest -q -rP -m cluster tests/adversary/campaign/test_ray_cluster.py
+
+# The CommonRoad tests (reading recordings, scenes and rasters, signals, replay, collect, the
+# export round trip) under the oldest commonroad-io that pyproject.toml allows. Only that package
+# differs from the main venv, so it goes into a --target folder put first on PYTHONPATH instead of
+# a second venv; COMMONROAD_IO_EXPECTED makes tests/rasterize/test_commonroad_compat.py check that
+# this release, not the venv's, is the one imported.
+CR_OLDEST     := 2024.3
+CR_OLDEST_DIR := $(VENV)/commonroad-io-$(CR_OLDEST)
+CR_TESTS := tests/rasterize/test_commonroad_compat.py tests/rasterize/test_commonroad_readings.py \
+	tests/rasterize/test_commonroad.py tests/rasterize/test_signals.py \
+	tests/riskmap/sim/test_commonroad_replay.py tests/riskmap/data/test_collect_commonroad.py \
+	tests/adversary/export/test_commonroad_export.py
+
+$(CR_OLDEST_DIR)/.installed: $(STAMP)
+	rm -rf $(CR_OLDEST_DIR)
+	$(BIN)/python -m pip install --quiet --no-deps --target $(CR_OLDEST_DIR) 'commonroad-io==$(CR_OLDEST)'
+	touch $@
+
+test-commonroad-oldest: $(CR_OLDEST_DIR)/.installed
+	PYTHONPATH=$(CURDIR)/$(CR_OLDEST_DIR) COMMONROAD_IO_EXPECTED=$(CR_OLDEST) $(BIN)/python -m pytest -q $(CR_TESTS)
 
 demo: $(STAMP)
 	$(BIN)/riskmap collect --env highway-v0 --episodes 2 --seed 2000 --out $(DEMO_OUT)/data/highway --workers 2 --resume

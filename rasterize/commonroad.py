@@ -1,7 +1,8 @@
 """Scenes from recorded traffic in CommonRoad scenario files (NGSIM US-101, I-80, highD, ...).
 
-Files are read with the `commonroad-io` package. CommonRoad's world frame is right-handed with x
-east and y north, like the toolkit's, so positions and orientations pass through unchanged.
+Files are read with the `commonroad-io` package (releases 2024.3 through 2026.x, through
+`rasterize.commonroad_compat`). CommonRoad's world frame is right-handed with x east and y north,
+like the toolkit's, so positions and orientations pass through unchanged.
 
 - Lanelets become `Lane`s: centre line and left/right bounds as the file gives them (CommonRoad
   samples both bounds at the same number of vertices, so they line up point by point). Line
@@ -116,12 +117,13 @@ def load_scenario(path: str | Path):
     if not path.is_file():
         raise InputError(f"CommonRoad file {path} does not exist; pass an existing scenario .xml")
     try:
-        # The XML reader alone: the package's protobuf reader needs an old protobuf runtime,
-        # which conflicts with tensorboard's, and XML is the format recordings come in.
-        from commonroad.common.reader.file_reader_xml import XMLFileReader
+        # The XML reader alone (why: rasterize.commonroad_compat), from the one module that
+        # knows where each supported commonroad-io release keeps its classes.
+        from rasterize.commonroad_compat import XMLFileReader
     except ImportError:
-        raise InputError("reading CommonRoad files needs the commonroad-io package; install it "
-                         "as the README's 'Recorded traffic' section says") from None
+        raise InputError("reading CommonRoad files needs the commonroad-io package (2024.3 to "
+                         "2026.x); install it as the README's `riskmap collect --from-commonroad` "
+                         "section says") from None
     try:
         # commonroad-io logs a warning per old-style lanelet successor tag ("successorRight ...
         # is of deprecated format"): hundreds per Lankershim file, none of them actionable.

@@ -160,7 +160,7 @@ def _states(track: np.ndarray, steps: np.ndarray, dt_s: float, initial: bool = F
             speed_before: float | None = None) -> list:
     """CommonRoad states of toolkit states `track` [T, 6] at time steps `steps` [T];
     `speed_before`: the speed one step before the first (its acceleration; else 0)."""
-    from commonroad.scenario.state import CustomState, InitialState
+    from rasterize.commonroad_compat import CustomState, InitialState
 
     speeds = track[:, 4] if speed_before is None else np.concatenate([[speed_before], track[:, 4]])
     accel = _accelerations(speeds, dt_s)[0 if speed_before is None else 1:]
@@ -187,10 +187,7 @@ def _first_segment(valid: np.ndarray, start: int) -> tuple[int, int] | None:
 def _dynamic_obstacle(run: AttackedRun, agent: int, obstacle_id: int, obstacle_type) -> tuple:
     """(DynamicObstacle of `agent` from t0 to the end of the run, or None if absent, and the
     number of its valid steps left out: those after a gap in its record)."""
-    from commonroad.geometry.obstacle_shapes.rect_obstacle_shape import RectObstacleShape
-    from commonroad.prediction.prediction import TrajectoryPrediction
-    from commonroad.scenario.obstacle import DynamicObstacle
-    from commonroad.scenario.trajectory import Trajectory
+    from rasterize.commonroad_compat import DynamicObstacle, Trajectory, TrajectoryPrediction, rect_shape
 
     span = _first_segment(run.valid[agent], run.t0_step)
     if span is None or span[0] == span[1]:
@@ -203,18 +200,14 @@ def _dynamic_obstacle(run: AttackedRun, agent: int, obstacle_id: int, obstacle_t
     states = _states(run.states[agent, first:last + 1], steps - run.t0_step, run.dt_s, speed_before=before)
     initial = _states(run.states[agent, first:first + 1], steps[:1] - run.t0_step, run.dt_s, initial=True,
                       speed_before=before)[0]
-    shape = RectObstacleShape(width=float(run.sizes[agent, 1]), length=float(run.sizes[agent, 0]))
+    shape = rect_shape(length=float(run.sizes[agent, 0]), width=float(run.sizes[agent, 1]))
     prediction = TrajectoryPrediction(Trajectory(int(steps[1] - run.t0_step), states[1:]), shape)
     return DynamicObstacle(int(obstacle_id), obstacle_type, shape, initial, prediction), left_out
 
 
 def _goal(run: AttackedRun, lane_width_m: float) -> tuple:
     """(GoalRegion, its description for the sidecar): module docstring."""
-    import shapely
-    from commonroad.common.util import Interval
-    from commonroad.geometry.occupancy.rect_occupancy import RectOccupancy
-    from commonroad.planning.goal import GoalRegion
-    from commonroad.scenario.state import CustomState
+    from rasterize.commonroad_compat import CustomState, GoalRegion, Interval, rect_region
 
     ego_t0 = run.states[run.ego, run.t0_step]
     route = run.record.window.route_xy
@@ -230,8 +223,7 @@ def _goal(run: AttackedRun, lane_width_m: float) -> tuple:
         rule = ("end of the record's route (the route rule's goal after its horizon), moved by the ego's "
                 "offset from the route's start at t0")
     orientation = float(np.arctan2(direction[1], direction[0]))
-    rect = RectOccupancy(rect_center=shapely.Point(float(end[0]), float(end[1])), width=float(lane_width_m),
-                         length=GOAL_LENGTH_M, orientation=orientation)
+    rect = rect_region(end, length=GOAL_LENGTH_M, width=float(lane_width_m), orientation=orientation)
     steps = (0, run.horizon_steps)
     region = GoalRegion([CustomState(time_step=Interval(*steps), position=rect)])
     return region, {"center": [float(end[0]), float(end[1])], "orientation": orientation,
@@ -245,7 +237,7 @@ def _lane_width(record) -> float:
 
 
 def _planning_problem(run: AttackedRun, problem_id: int) -> tuple:
-    from commonroad.planning.planning_problem import PlanningProblem, PlanningProblemSet
+    from rasterize.commonroad_compat import PlanningProblem, PlanningProblemSet
 
     k0, ego = run.t0_step, run.ego
     before = float(run.states[ego, k0 - 1, 4]) if k0 > 0 and run.valid[ego, k0 - 1] else None
@@ -262,8 +254,8 @@ def _read_recording(path: str):
 
     Its XML reader, which is what `CommonRoadFileReader` runs for .xml files: importing
     `CommonRoadFileReader` also imports its protobuf reader, which needs an older protobuf
-    runtime than the one installed here (see `rasterize.commonroad.load_scenario`)."""
-    from commonroad.common.reader.file_reader_xml import XMLFileReader
+    runtime than the one installed here (see `rasterize.commonroad_compat`)."""
+    from rasterize.commonroad_compat import XMLFileReader
 
     if not Path(path).is_file():
         raise InputError(f"recording {path} is not there; put it back (the scenes were cut from it)")
@@ -285,9 +277,8 @@ def _shift_lights(network, steps: int) -> None:
 
 def _recorded_scenario(run: AttackedRun) -> tuple:
     """(Scenario, id of each log agent, tags, source facts) of a recorded scene."""
-    from commonroad.scenario.scenario import Scenario, Tag
-
     from adversary.crash.recorded import recording_traffic
+    from rasterize.commonroad_compat import Scenario, Tag
 
     scene = run.record.scene
     original, _ = _read_recording(scene.recording)
@@ -326,7 +317,7 @@ def _straight(points: np.ndarray) -> bool:
 
 def _highway_lanelets(run: AttackedRun) -> list:
     """Lanelets of a highway-env scene's stored lanes (module docstring)."""
-    from commonroad.scenario.lanelet import Lanelet, LaneletType, LineMarking
+    from rasterize.commonroad_compat import Lanelet, LaneletType, LineMarking
 
     markings = {0: LineMarking.NO_MARKING, 1: LineMarking.DASHED, 2: LineMarking.SOLID, 3: LineMarking.SOLID}
     lanes = run.record.window.lanes
@@ -369,10 +360,7 @@ def _highway_lanelets(run: AttackedRun) -> list:
 
 
 def _highway_scenario(run: AttackedRun) -> tuple:
-    from commonroad.common.common_scenario import ScenarioID
-    from commonroad.scenario.obstacle import ObstacleType
-    from commonroad.scenario.scenario import Scenario, Tag
-
+    from rasterize.commonroad_compat import ObstacleType, Scenario, ScenarioID, Tag
     from rasterize.scene import AgentKind
 
     scene = run.record.scene
@@ -466,9 +454,7 @@ def build_commonroad(run: AttackedRun) -> tuple:
 def write_commonroad(attack: dict, record, out_dir: Path, name: str = "") -> tuple[Path, Path]:
     """Write attack record `attack` on scene `record` as OUT_DIR/<name>.xml and its sidecar
     OUT_DIR/<name>.json (module docstring); returns both paths. The sidecar is written last."""
-    from commonroad.common.writer.file_writer_interface import OverwriteExistingFile
-    from commonroad.common.writer.file_writer_xml import XMLFileWriter
-
+    from rasterize.commonroad_compat import OverwriteExistingFile, XMLFileWriter
     from riskmap.infra.atomic import atomic_write, write_json
 
     name = name or attack.get("name") or "scene"
@@ -548,14 +534,17 @@ def render_png(xml: Path, png: Path, time_step: int | None = None, radius_m: flo
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from commonroad.geometry.obstacle_shapes.rect_obstacle_shape import RectObstacleShape
-    from commonroad.prediction.prediction import TrajectoryPrediction
-    from commonroad.scenario.obstacle import DynamicObstacle, ObstacleType
-    from commonroad.scenario.trajectory import Trajectory
-    from commonroad.visualization.draw_params import MPDrawParams
-    from commonroad.visualization.mp_renderer import MPRenderer
-
+    from rasterize.commonroad_compat import (
+        DynamicObstacle,
+        ObstacleType,
+        Trajectory,
+        TrajectoryPrediction,
+        mp_renderer,
+        rect_shape,
+    )
     from riskmap.infra.atomic import atomic_write
+
+    MPRenderer, MPDrawParams = mp_renderer()
 
     scenario, problems, sidecar = read_exported(xml)
     if time_step is None:
@@ -566,7 +555,7 @@ def render_png(xml: Path, png: Path, time_step: int | None = None, radius_m: flo
     if not 0 <= time_step <= sidecar["end_time_step"]:
         raise InputError(f"time step {time_step} is outside {xml} (0..{sidecar['end_time_step']})")
     at = min(int(np.searchsorted(ego_steps, time_step)), len(ego_steps) - 1)
-    shape = RectObstacleShape(width=sidecar["ego"]["width_m"], length=sidecar["ego"]["length_m"])
+    shape = rect_shape(length=sidecar["ego"]["length_m"], width=sidecar["ego"]["width_m"])
     states = _states(ego, ego_steps, sidecar["dt_s"])
     initial = _states(ego[:1], ego_steps[:1], sidecar["dt_s"], initial=True)[0]
     ego_obstacle = DynamicObstacle(sidecar["planning_problem_id"], ObstacleType.CAR, shape, initial,
@@ -609,7 +598,9 @@ def render_png(xml: Path, png: Path, time_step: int | None = None, radius_m: flo
     ax.plot(ego[:, 0], ego[:, 1], "--", color="#2ca02c", lw=1.2, zorder=40, label="ego, driven (t0 to end)")
     ax.legend(loc="lower left", fontsize=8)
     collision = sidecar["collision"]
-    title = (f"{sidecar['scene']} ({sidecar['scenario_id']}) | {sidecar['planner']} / "
+    from riskmap.registry import display_name
+
+    title = (f"{sidecar['scene']} ({sidecar['scenario_id']}) | {display_name(sidecar['planner'])} / "
              f"{sidecar['selector']} | "
              f"t = {time_step * sidecar['dt_s']:.1f} s after t0 | ego green (planning problem "
              f"{sidecar['planning_problem_id']}), adversary red ({adversary_id})")

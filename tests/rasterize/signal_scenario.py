@@ -41,18 +41,14 @@ def _left_turn(n: int = 19) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def _cycle(*elements: tuple[str, float]):
-    from commonroad.scenario.traffic_light import (
-        TrafficLightCycle,
-        TrafficLightCycleElement,
-        TrafficLightState,
-    )
+    from rasterize.commonroad_compat import TrafficLightCycle, TrafficLightCycleElement, TrafficLightState
 
     return TrafficLightCycle([TrafficLightCycleElement(TrafficLightState(state), round(s * 10))
                               for state, s in elements], time_offset=0)
 
 
 def _track(xy: np.ndarray, heading: np.ndarray, speed: np.ndarray):
-    from commonroad.scenario.state import CustomState, InitialState
+    from rasterize.commonroad_compat import CustomState, InitialState
 
     initial = InitialState(position=xy[0], orientation=float(heading[0]), velocity=float(speed[0]),
                            time_step=0, acceleration=0.0, yaw_rate=0.0, slip_angle=0.0)
@@ -62,13 +58,16 @@ def _track(xy: np.ndarray, heading: np.ndarray, speed: np.ndarray):
 
 
 def _vehicle(obstacle_id: int, xy: np.ndarray, heading: np.ndarray, speed: np.ndarray):
-    from commonroad.geometry.obstacle_shapes.rect_obstacle_shape import RectObstacleShape
-    from commonroad.prediction.prediction import TrajectoryPrediction
-    from commonroad.scenario.obstacle import DynamicObstacle, ObstacleType
-    from commonroad.scenario.trajectory import Trajectory
+    from rasterize.commonroad_compat import (
+        DynamicObstacle,
+        ObstacleType,
+        Trajectory,
+        TrajectoryPrediction,
+        rect_shape,
+    )
 
     initial, rest = _track(xy, heading, speed)
-    shape = RectObstacleShape(length=LENGTH, width=WIDTH)
+    shape = rect_shape(length=LENGTH, width=WIDTH)
     return DynamicObstacle(obstacle_id, ObstacleType.CAR, shape, initial,
                            TrajectoryPrediction(Trajectory(1, rest), shape))
 
@@ -90,10 +89,16 @@ def left_turner_xy(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def signal_scenario(name: str = "USA_Synth-1_1_T-1", with_uncycled_light: bool = True):
     """The Scenario (module doc)."""
-    from commonroad.common.common_lanelet import LineMarking, StopLine
-    from commonroad.scenario.lanelet import Lanelet, LaneletNetwork
-    from commonroad.scenario.scenario import Scenario, ScenarioID
-    from commonroad.scenario.traffic_light import TrafficLight, TrafficLightDirection
+    from rasterize.commonroad_compat import (
+        Lanelet,
+        LaneletNetwork,
+        LineMarking,
+        Scenario,
+        ScenarioID,
+        StopLine,
+        TrafficLight,
+        TrafficLightDirection,
+    )
 
     scenario = Scenario(0.1, ScenarioID.from_benchmark_id(name, "2020a"))
     network = LaneletNetwork()

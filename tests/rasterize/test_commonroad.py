@@ -138,18 +138,22 @@ def test_vehicles_leaving_are_invalid_after_their_last_record(traffic):
 
 
 def test_vehicle_entering_is_invalid_before_its_first_record():
-    from commonroad.geometry.obstacle_shapes.rect_obstacle_shape import RectObstacleShape
-    from commonroad.prediction.prediction import TrajectoryPrediction
-    from commonroad.scenario.obstacle import DynamicObstacle, ObstacleType
-    from commonroad.scenario.state import InitialState, KSState
-    from commonroad.scenario.trajectory import Trajectory
+    from rasterize.commonroad_compat import (
+        DynamicObstacle,
+        InitialState,
+        KSState,
+        ObstacleType,
+        Trajectory,
+        TrajectoryPrediction,
+        rect_shape,
+    )
 
     scenario = load_scenario(NEW)
     # A car entering at step 12 (1.2 s) beside vehicle 475, driving 10 m/s along +x.
     start = RecordedTraffic(scenario).states[RecordedTraffic(scenario).index_of(475), 20, :2] + [0, 8]
     states = [KSState(time_step=k, position=start + [1.0 * (k - 12), 0.0], orientation=0.0,
                       velocity=10.0, steering_angle=0.0) for k in range(13, 60)]
-    shape = RectObstacleShape(width=2.0, length=4.0)
+    shape = rect_shape(length=4.0, width=2.0)
     scenario.add_objects(DynamicObstacle(
         9999, ObstacleType.CAR, shape,
         InitialState(time_step=12, position=start, orientation=0.0, velocity=10.0, yaw_rate=0.0,

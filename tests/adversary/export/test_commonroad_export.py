@@ -8,9 +8,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import shapely
-from commonroad.common.reader.file_reader_xml import XMLFileReader
-from commonroad.common.writer.file_writer_xml import XMLFileWriter
 
 from adversary.cli import main
 from adversary.crash.attack import AttackConfig
@@ -19,6 +16,7 @@ from adversary.crash.recorded import recording_traffic
 from adversary.crash.run import record_commonroad_scenes, run_attacks
 from adversary.crash.scenes import AttackScene, load_record, record_attack_scene
 from adversary.export.commonroad import OBSTACLE_ID_OFFSET, write_commonroad
+from rasterize.commonroad_compat import XMLFileReader, XMLFileWriter, region_contains
 from riskmap.registry import cached_planner
 from riskmap.sim.metrics import box_iou
 
@@ -137,7 +135,7 @@ def test_exported_scene_reads_back_with_the_run_s_vehicles_and_ego(attack_run, e
     assert problem.initial_state.orientation == pytest.approx(np.arctan2(start[3], start[2]), abs=1e-6)
     [goal] = problem.goal.state_list
     assert goal.time_step.start == 0 and goal.time_step.end == sidecar["horizon_steps"] == 60
-    assert goal.position.contains_point(shapely.Point(*sidecar["goal"]["center"]))
+    assert region_contains(goal.position, sidecar["goal"]["center"])
     # the ego's drive from t0 is in the sidecar, at the same steps
     driven = np.array(sidecar["ego"]["trajectory"])
     assert np.array_equal(driven[:, 0], steps)
