@@ -23,6 +23,14 @@ Your own planner, with no change to the toolkit:
     NAME:ARG         entry `NAME` of the entry-point group `riskmap.planners` (an installed
                      package declares it), called as `factory(ARG, seed=SEED)`
 
+A `py:` SPEC may carry `name=NAME` among its keys: the planner's display name in tables, figure
+titles and summaries (letters, digits and `. _ + -`); it is not passed to the factory. Without
+one, a planner is shown by a short name made from its SPEC (`display_name`): `idm`, `cv`, ... as
+written, a checkpoint's file stem for `riskmap:`/`cnn:`/`cnn_lstm:`/`rvsg:`, the factory's name for
+`py:`, `NAME-<ARG's short name>` for a plug-in (`guard-riskmap_highway`); two planners of one run
+that would share a name are told apart by `-2`, `-3`, ... (`display_names`). Records keep the
+whole SPEC beside the name.
+
 Either must return a planner (`riskmap.sim.plan.Planner`: `reset(scene)`, `plan(scene) -> Plan`,
 or `drives_itself = True`); anything else is a one-line error naming the SPEC. The guard is an
 entry-point plug-in (`guard`, `guarded`, `guard-always`, declared in pyproject.toml): it wraps a
@@ -40,12 +48,19 @@ SPECS = ("idm", "yielding", "cv", "replay", "riskmap:PATH", "cnn:PATH", "cnn_lst
 # The one help text of every command-line flag that takes a planner SPEC.
 SPEC_HELP = ("planner SPEC: idm, yielding, cv, replay (recordings), riskmap:PATH, cnn:PATH, "
              "cnn_lstm:PATH, rvsg:PATH, guard:SPEC, your own py:package.module:Factory[?key=value&...] "
-             "or an installed plug-in NAME:ARG (README, \"Your own planner\")")
+             "(the key name=NAME sets its name in tables and figures) or an installed plug-in NAME:ARG "
+             "(README, \"Your own planner\")")
+# A display name goes into tables, figure titles and file names: one path component, no spaces.
+NAME_PATTERN = r"[A-Za-z0-9][A-Za-z0-9._+-]{0,63}"
+NAME_KEY = "name"
+_CHECKPOINT_KINDS = ("riskmap", "cnn", "cnn_lstm", "cnn-lstm", "rvsg")
+_SIMPLE_KINDS = ("idm", "yielding", "cv", "replay")
 
 
 def make_planner(spec: str, seed: int = 0, goal_variance: float | None = None):
     """A `Planner` (or `HumanDriver`) for `spec`; `goal_variance` (cells²) overrides a risk-map
     checkpoint's planning-time goal variance."""
+    spec, _ = split_name(spec)          # the name is the toolkit's, never a factory's key
     kind, _, arg = spec.partition(":")
     if kind == "idm" and not arg:
         return HumanDriver()
@@ -76,6 +91,107 @@ def make_planner(spec: str, seed: int = 0, goal_variance: float | None = None):
     if factory is not None:
         return _made(spec, factory, arg, seed=seed)
     raise InputError(f"unknown planner spec {spec!r}; use one of {', '.join(SPECS)}")
+
+
+def split_name(spec: str) -> tuple[str, str | None]:
+    """(`spec` without its `name=` key, that name or None). Only `py:` SPECs have keys; the
+    others are returned whole (a plug-in's ARG, e.g. `guard:py:...?name=x`, is split when the
+    plug-in makes its inner planner)."""
+    from urllib.parse import unquote_plus
+
+    target, sep, query = spec.partition("?")
+    if not spec.startswith("py:") or not sep:
+        return spec, None
+    items = query.split("&")
+    named = [item for item in items if unquote_plus(item.partition("=")[0]) == NAME_KEY]
+    if not named:
+        return spec, None
+    if len(named) > 1:
+        raise InputError(f"planner {spec!r} gives {NAME_KEY!r} twice; give it once")
+    name = unquote_plus(named[0].partition("=")[2])
+    _check_name(spec, name)
+    rest = [item for item in items if item not in named]
+    return target + ("?" + "&".join(rest) if rest else ""), name
+
+
+def _check_name(spec: str, name: str) -> None:
+    import re
+
+    if not re.fullmatch(NAME_PATTERN, name):
+        raise InputError(f"planner {spec!r}: name={name!r} cannot name a planner in tables and file "
+                         "names; use 1 to 64 letters, digits, '.', '_', '+' or '-', starting with a "
+                         "letter or digit")
+
+
+def display_name(spec: str) -> str:
+    """The planner's name in tables and figure titles: its `name=` key, else a short name made
+    from the SPEC (module docstring). Reads the SPEC only: nothing is imported or loaded."""
+    bare, name = split_name(spec)
+    return name if name is not None else _default_name(bare)
+
+
+def _default_name(spec: str) -> str:
+    import re
+    from pathlib import PurePath
+
+    kind, sep, arg = spec.partition(":")
+    if not sep:
+        text = kind
+    elif kind in _CHECKPOINT_KINDS:
+        text = PurePath(arg).name.removesuffix(".safetensors")
+    elif kind == "py":
+        # the factory, dotted attributes and keys dropped: `...:GapKeeper?headway_s=2` -> GapKeeper
+        text = arg.partition("?")[0].rpartition(":")[2].rpartition(".")[2]
+    else:                               # a plug-in NAME:ARG; its ARG may itself be a SPEC
+        text = f"{kind}-{_short_arg(arg)}"
+    # text from a SPEC may hold ':', '/', '?' ...; a name must be one clean file-name component
+    text = re.sub(r"[^A-Za-z0-9._+-]+", "-", text).strip("-._+")[:64].rstrip("-._+")
+    return text or "planner"
+
+
+def _short_arg(arg: str) -> str:
+    """A plug-in ARG's short name: a SPEC's display name, else its last path component."""
+    from pathlib import PurePath
+
+    kind, sep, _ = arg.partition(":")
+    if kind in _SIMPLE_KINDS + _CHECKPOINT_KINDS + ("py",) or (sep and kind in _plugin_names()):
+        return display_name(arg)
+    return PurePath(arg).name.removesuffix(".safetensors") if arg else ""
+
+
+def _plugin_names() -> set[str]:
+    from importlib.metadata import entry_points
+
+    return {entry.name for entry in entry_points(group=PLUGIN_GROUP)}
+
+
+def display_names(specs) -> dict[str, str]:
+    """SPEC -> display name for the planners of one run, each name used once. A `name=` given
+    is kept as written (two planners given the same one is an error); a default name that is
+    taken gets `-2`, `-3`, ... in the order the SPECs come."""
+    specs = list(dict.fromkeys(specs))
+    given = {spec: split_name(spec)[1] for spec in specs}
+    taken: dict[str, str] = {}
+    for spec, name in given.items():
+        if name is not None and name in taken:
+            raise InputError(f"planners {taken[name]!r} and {spec!r} are both named {name!r}; give "
+                             "each its own name=")
+        if name is not None:
+            taken[name] = spec
+    names = {}
+    for spec in specs:
+        names[spec] = given[spec] if given[spec] is not None else _unique(_default_name(spec), taken)
+        taken.setdefault(names[spec], spec)
+    return names
+
+
+def _unique(name: str, taken: dict) -> str:
+    if name not in taken:
+        return name
+    number = 2
+    while f"{name}-{number}" in taken:
+        number += 1
+    return f"{name}-{number}"
 
 
 def is_planner(obj) -> bool:
@@ -213,7 +329,7 @@ def cached_planner(spec: str, seed: int = 0, goal_variance: float | None = None)
     """`make_planner(spec, seed, goal_variance)`, made once per process: loading a checkpoint
     costs seconds, and a planner is reset at the start of every episode, so reuse does not
     change results."""
-    key = (spec, seed, goal_variance)
+    key = (split_name(spec)[0], seed, goal_variance)     # one planner, however it is named
     if key not in _CACHED:
         _CACHED[key] = make_planner(spec, seed=seed, goal_variance=goal_variance)
     return _CACHED[key]

@@ -49,6 +49,7 @@ from rasterize.config import family_of_env
 from rasterize.errors import InputError
 from rasterize.timebase import HISTORY_S, PLAN_DT_S
 from riskmap.infra.config_mapping import from_mapping, require, to_plain
+from riskmap.registry import display_names
 
 T0_STEP_S, T0_MIN_S = PLAN_DT_S, HISTORY_S   # a recorded scene's attack time: the window's grid and history
 _ENV_ONLY, _RECORDED_ONLY = ("seed",), ("commonroad", "family", "t0")
@@ -172,6 +173,7 @@ class CampaignConfig:
 def _validate(config: CampaignConfig, where: str = "campaign config") -> CampaignConfig:
     require(len(config.planners) >= 1, "campaign config: planners must list at least one SPEC")
     require(len(set(config.planners)) == len(config.planners), "campaign config: planners repeat a SPEC")
+    display_names(config.planners)    # a bad or repeated name= fails with the config, not the report
     require(len(config.scenarios) >= 1, "campaign config: scenarios must list at least one family")
     require(len(config.attacks) >= 1, "campaign config: attacks must list at least one attack")
     labels = [a.label or a.name for a in config.attacks]

@@ -55,7 +55,10 @@ class Job:
     def job_id(self) -> str:
         """Readable and unique: the key fields, then a hash of every field. A highway-env job's
         hash leaves out the (empty) scene, so ids from before recorded families stay; a recorded
-        scene enters by its recording's file name, so moving the recordings keeps the ids."""
+        scene enters by its recording's file name, so moving the recordings keeps the ids. The
+        planner enters by its whole SPEC, not its display name: the id is the key `--resume`
+        finds a finished job by (records/JOB_ID.json), and a display name depends on the other
+        planners listed (`-2` suffixes), so campaigns keep resuming as they did."""
         plain = to_plain(self)
         if self.scene is None:
             del plain["scene"]

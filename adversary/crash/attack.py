@@ -232,9 +232,10 @@ def attack_records(records: list, models: Models, planner, planner_spec: str, co
         panel = panels[i] if panels else None
         if panel is not None:
             from adversary.crash.panel import save_attack_panel
+            from riskmap.registry import display_name
 
             save_attack_panel(record, tracks, item.rows[1:], adv_row, final, metrics, panel,
-                              f"{record.scene.where} | {planner_spec} | {config.selector}")
+                              f"{record.scene.where} | {display_name(planner_spec)} | {config.selector}")
         out.append({**base, "status": "ok", "adversary_row": adv_row,
                     "adversary_log_id": int(record.agent_ids[adv_row]),
                     "collision": bool(metrics["collision"]), "metrics": metrics,

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from adversary.crash.config import TrainSelectorConfig, TrainTrafficConfig
 from rasterize.timebase import REPLAN_HZ
-from riskmap.registry import SPEC_HELP
+from riskmap.registry import SPEC_HELP, display_name
 from riskmap.infra.cli import (
     add_config_options,
     config_from_args,
@@ -124,7 +124,7 @@ def _run_attack(args: argparse.Namespace) -> int:
                           workers=args.workers, resume=args.resume, panels=args.panels,
                           progress=not args.quiet, batch_size=args.batch_size)
     print(TABLE_HEADER)
-    print(table_row(f"{args.planner} / {args.selector}", summary["summary"]))
+    print(table_row(f"{display_name(args.planner)} / {args.selector}", summary["summary"]))
     return 0
 
 

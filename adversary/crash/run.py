@@ -297,7 +297,7 @@ def run_attacks(planner_spec: str, scenes_dir: Path, count: int, config: AttackC
                 out: Path, traffic: Path, selectors: Path | None, workers: int = 1, resume: bool = False,
                 panels: int = 0, progress: bool = True, batch_size: int = 8) -> dict:
     from adversary.crash.scenes import load_record
-    from riskmap.registry import make_planner
+    from riskmap.registry import display_name, make_planner
 
     out = Path(out)
     paths = scene_paths(scenes_dir, count)
@@ -353,7 +353,7 @@ def run_attacks(planner_spec: str, scenes_dir: Path, count: int, config: AttackC
     records = [json.loads((attacks_dir / f"{p.stem}.json").read_text()) for p in paths]
     summary = {**meta, "summary": summarise(records)}
     write_json(out / "summary.json", summary)
-    label = f"{planner_spec} / {config.selector}"
+    label = f"{display_name(planner_spec)} / {config.selector}"
     atomic_write(out / "table.md", lambda f: f.write(
         (TABLE_HEADER + "\n" + table_row(label, summary["summary"]) + "\n\n" + TABLE_NOTE + "\n").encode()))
     return summary

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from adversary.report.numbers import COLLISION_TYPES
+from adversary.report.numbers import COLLISION_TYPES, planner_name
 
 
 def _plt():
@@ -18,10 +18,9 @@ def _plt():
     return plt
 
 
-def short_spec(spec: str) -> str:
-    """A planner SPEC short enough for a figure label: `riskmap:a/b/ckpt` -> `riskmap:ckpt`."""
-    kind, sep, arg = spec.partition(":")
-    return f"{kind}:{Path(arg).name}" if sep and "/" in arg else spec
+def _names(rows: list[dict]) -> dict[str, str]:
+    """SPEC -> the display name its rows carry (figures label planners by name, never by SPEC)."""
+    return {r["planner"]: planner_name(r) for r in rows}
 
 
 def _save(fig, path: Path, rect=(0, 0, 1, 1)) -> str:
@@ -44,6 +43,7 @@ def metrics_figure(rows: list[dict], path: Path) -> str:
     width = 0.8 / max(1, len(planners))
     colours = plt.get_cmap("tab10")
     by_key = {(r["planner"], r["attack"]): r for r in rows}
+    name = _names(rows)
     for ax, (key, title, scale) in zip(axes, panels):
         for j, planner in enumerate(planners):
             xs, ys, lo, hi = [], [], [], []
@@ -55,7 +55,7 @@ def metrics_figure(rows: list[dict], path: Path) -> str:
                 ys.append(stat["value"] * scale)
                 lo.append((stat["value"] - stat["lo"]) * scale)
                 hi.append((stat["hi"] - stat["value"]) * scale)
-            ax.bar(xs, ys, width, yerr=[lo, hi], capsize=3, color=colours(j), label=short_spec(planner))
+            ax.bar(xs, ys, width, yerr=[lo, hi], capsize=3, color=colours(j), label=name[planner])
         ax.set_xticks(range(len(attacks)), attacks, rotation=15, fontsize=8)
         ax.set_title(title, fontsize=10)
         ax.grid(axis="y", alpha=0.3)
@@ -116,7 +116,8 @@ def headline_figure(rows: list[dict], attack_order: list[str], path: Path) -> st
         ax.set_title(f"{family} ({jobs} jobs)", fontsize=10)
         ax.grid(axis="y", alpha=0.3)
     axes[0][0].set_ylabel("failures that count (%)")
-    names = [short_spec(p) for p in planners]
+    name = _names(rows)
+    names = [name[p] for p in planners]
     legend_in = 0.7 + 0.058 * max(len(name) for name in names + ["every collision"])     # about 0.058 in a character
     fig.legend([Patch(color=colour[p]) for p in planners] + [Patch(fill=False, edgecolor="#555", linestyle="--")],
                names + ["every collision"], loc="center right", fontsize=8, frameon=False, title="planner",
@@ -128,7 +129,7 @@ def headline_figure(rows: list[dict], attack_order: list[str], path: Path) -> st
 
 def collision_types_figure(rows: list[dict], path: Path) -> str:
     plt = _plt()
-    labels = [f"{short_spec(r['planner'])}\n{r['attack']}" for r in rows]
+    labels = [f"{planner_name(r)}\n{r['attack']}" for r in rows]
     fig, ax = plt.subplots(figsize=(max(5.0, 1.3 * len(rows) + 2), 3.6), dpi=100)
     bottom = np.zeros(len(rows))
     colours = plt.get_cmap("Set2")
@@ -157,13 +158,14 @@ def search_figure(history: list[dict], path: Path) -> str:
     groups: dict[tuple[str, str], list[dict]] = {}
     for h in history:
         groups.setdefault((h["planner"], h["attack"]), []).append(h)
+    name = _names(history)
     # Distinct line styles and markers: identical searches (e.g. a guard that never intervenes)
     # would otherwise hide each other.
     styles, markers = ("-", "--", ":", "-."), "osD^v<>"
     for i, ((planner, attack), runs) in enumerate(groups.items()):
         depth = max(len(h["generations"]) for h in runs)
         size = sum(g.get("evaluations", 0) for g in runs[0]["generations"][:1]) * len(runs)
-        label = (f"{short_spec(planner)} / {attack} ({len(runs)} search{'es' if len(runs) > 1 else ''}"
+        label = (f"{name[planner]} / {attack} ({len(runs)} search{'es' if len(runs) > 1 else ''}"
                  f"{f', {size} evaluations a generation' if size else ''})")
         if depth:
             collisions = np.zeros(depth)

@@ -8,7 +8,6 @@ from __future__ import annotations
 import zipfile
 from pathlib import Path
 
-from adversary.report.figures import short_spec
 from adversary.report.frames import (
     animation_frames,
     gif_frame_count,
@@ -17,6 +16,7 @@ from adversary.report.frames import (
     strip_image,
     write_gif,
 )
+from adversary.report.numbers import planner_name
 from rasterize.errors import InputError
 from riskmap.infra.atomic import atomic_write
 
@@ -34,7 +34,7 @@ def job_title(record: dict) -> str:
         scene = f"{record['env_id']} {Path(record['recording']).stem} vehicle {record['ego_id']}"
     else:
         scene = f"{record['env_id']} seed {record['scene_seed']} episode {record['episode']}"
-    return f"{short_spec(record['planner'])} | {scene} | {record['attack']}"
+    return f"{planner_name(record)} | {scene} | {record['attack']}"
 
 
 def outcome(record: dict) -> str:
@@ -93,7 +93,7 @@ def job_media(artifact: Path, record: dict, out_dir: Path, animate: bool) -> dic
         _save_png(risk, folder / f"{job_id}_risk.png")
         media["risk"] = f"{MEDIA_DIR}/{job_id}_risk.png"
     if animate:
-        frames, durations = animation_frames(art, env_id, f"{short_spec(record['planner'])}, {record['attack']}",
+        frames, durations = animation_frames(art, env_id, f"{planner_name(record)}, {record['attack']}",
                                              record.get("collision_time_s"))
         if len(frames) >= 2:
             gif = write_gif(frames, durations, folder / f"{job_id}.gif")

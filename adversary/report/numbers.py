@@ -28,6 +28,9 @@ CRASH's Table III: its collision rate is collisions with the adversary over ever
 scenes that could not be attacked included (`not_attacked` counts them).
 
 Timings (plan ms, wall s) depend on the machine; they sit apart under "timing".
+
+Every row that names a planner holds its SPEC ("planner") and its display name ("planner_name",
+riskmap.registry.display_names over the campaign's planners), which tables and figures show.
 """
 
 from __future__ import annotations
@@ -39,6 +42,7 @@ import numpy as np
 from adversary.attacks.episode import GUARD_FIELDS
 from adversary.attacks.recorded import job_family
 from riskmap.infra.stats import bootstrap_mean, wilson
+from riskmap.registry import display_name, display_names, split_name
 from riskmap.sim.failures import summarise_failures
 from riskmap.sim.metrics import CAMPAIGN_COLLISION_TYPES
 from riskmap.sim.record import current_names
@@ -148,7 +152,17 @@ def _scene_of(record: dict) -> tuple:
             record.get("ego_id"))
 
 
-def _guard_pairs(records: list[dict]) -> list[dict]:
+def _unguarded(planner: str, planners) -> str | None:
+    """The SPEC among `planners` that `guard:SPEC` (or `guarded:SPEC`) wraps, or None."""
+    prefix, _, inner = planner.partition(":")
+    if prefix not in ("guard", "guarded"):
+        return None
+    # the inner SPEC as listed, whatever its own name= (the planner is the same)
+    bare = {split_name(p)[0]: p for p in planners}
+    return inner if inner in planners else bare.get(split_name(inner)[0])
+
+
+def _guard_pairs(records: list[dict], names: dict[str, str]) -> list[dict]:
     """`guard:SPEC` (or `guarded:SPEC`) next to the same attack on SPEC over the scenes both drove
     (SPEC's other scenes are left out, e.g. a family the guarded planner was not listed on): the
     metrics off and on, what the guard did (`_guard_metrics`), `identical` (every metric off
@@ -158,9 +172,10 @@ def _guard_pairs(records: list[dict]) -> list[dict]:
     for r in records:
         groups[r["planner"], r["attack"]].append(r)
     pairs = []
+    planners = {r["planner"] for r in records}
     for (planner, attack), guarded in sorted(groups.items()):
-        prefix, _, inner = planner.partition(":")
-        if prefix not in ("guard", "guarded") or (inner, attack) not in groups:
+        inner = _unguarded(planner, planners)
+        if inner is None or (inner, attack) not in groups:
             continue
         scenes = {_scene_of(r) for r in guarded}
         base = [r for r in groups[inner, attack] if _scene_of(r) in scenes]
@@ -169,7 +184,7 @@ def _guard_pairs(records: list[dict]) -> list[dict]:
         off_row, on_row = _group_metrics(base), _group_metrics(guarded)
         off = {k: off_row[k] for k in GUARD_PAIR_METRICS}
         on = {k: on_row[k] for k in GUARD_PAIR_METRICS}
-        pair = {"planner": inner, "attack": attack, "off": off, "on": on,
+        pair = {"planner": inner, "planner_name": names[inner], "attack": attack, "off": off, "on": on,
                 "guard": on_row["guard"], "identical": off == on}
         pair["note"] = _guard_note(pair) if pair["identical"] else None
         pairs.append(pair)
@@ -178,7 +193,7 @@ def _guard_pairs(records: list[dict]) -> list[dict]:
 
 def _guard_note(pair: dict) -> str:
     """The sentence under the guard table for a pair whose metrics are identical off and on."""
-    where = f"{pair['planner']}, {pair['attack']}: guard on and off give identical results"
+    where = f"{planner_name(pair)}, {pair['attack']}: guard on and off give identical results"
     guard = pair["guard"]
     if guard is None:
         return f"{where}; the records hold no guard counts (written before they were kept)."
@@ -215,10 +230,26 @@ def worst_scenes(records: list[dict], count: int) -> list[dict]:
     return ok[:count]
 
 
-def report_numbers(records: list[dict], gallery: int) -> tuple[dict, dict]:
+def planner_name(row: dict) -> str:
+    """The planner of a row or record as tables and figures show it: the display name
+    `report_numbers` put beside its SPEC, else the one its SPEC alone makes."""
+    return row.get("planner_name") or display_name(row["planner"])
+
+
+def _name_rows(rows, names: dict[str, str]) -> None:
+    """Put each row's display name beside its SPEC (rows: a list of dicts, or None)."""
+    for row in rows or ():
+        if "planner" in row:
+            row["planner_name"] = names[row["planner"]]
+
+
+def report_numbers(records: list[dict], gallery: int,
+                   names: dict[str, str] | None = None) -> tuple[dict, dict]:
     """(results, timing): everything the page shows; timing is machine-dependent. Records of
-    older campaigns are read under today's names (riskmap.sim.record.current_names)."""
+    older campaigns are read under today's names (riskmap.sim.record.current_names). `names`:
+    SPEC -> display name (default: `display_names` of the records' planners)."""
     records = [current_names(r) for r in records]
+    names = names or display_names(sorted({r["planner"] for r in records}))
     for r in records:
         r.setdefault("family", job_family(r["env_id"]))
     comparison, timing_rows = _rows(records, ("planner", "attack"))
@@ -235,7 +266,7 @@ def report_numbers(records: list[dict], gallery: int) -> tuple[dict, dict]:
         "crash_ablation": ablation,
         "search": _rows(search, ("attack", "planner"))[0] if search else None,
         "search_history": _search_history(records),
-        "guard": _guard_pairs(records) or None,
+        "guard": _guard_pairs(records, names) or None,
         "worst": [{**{k: r[k] for k in ("job_id", "planner", "env_id", "scene_seed", "episode", "attack",
                                         "collided", "collided_with_adversary", "collision_type",
                                         "kinematic_mps", "safety_pct", "distance_m")},
@@ -245,4 +276,9 @@ def report_numbers(records: list[dict], gallery: int) -> tuple[dict, dict]:
         "failures": [{"job_id": r["job_id"], "error": r["error"]}
                      for r in records if r["status"] != "ok"],
     }
+    for key in ("comparison", "by_family", "collision_types", "crash_ablation", "search", "search_history",
+                "guard", "worst"):
+        _name_rows(results[key], names)
+    _name_rows(timing_rows, names)
+    _name_rows(ablation_timing, names)
     return results, {"by_planner_attack": timing_rows, "crash_ablation": ablation_timing, **_timing(records)}

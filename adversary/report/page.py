@@ -8,7 +8,9 @@ rate per planner and attack with its intervals, every collision's rate beside it
 
 report.json holds every number on the page: "results" (a function of the records alone, so a
 resumed or distributed campaign gives the same), "timing" (machine-dependent), the config,
-versions and provenance, and "pages" (each job's page).
+versions and provenance, and "pages" (each job's page). Planners are shown by their display names
+(riskmap.registry.display_names over the campaign's planners); report.json keeps each SPEC
+("planner") beside its name ("planner_name").
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ from adversary.report.summary import summary_paragraph
 from rasterize.errors import InputError
 from riskmap.infra.atomic import atomic_write, write_json
 from riskmap.infra.provenance import provenance
+from riskmap.registry import display_names
 from riskmap.sim.failures import failure_explanation, unknown_failure
 from riskmap.sim.record import current_names
 
@@ -121,7 +124,9 @@ def make_report(campaign_dir: Path, out_dir: Path | None = None) -> dict:
         raise InputError(f"{campaign_dir}: no finished jobs yet; run `adversary stress-test` first")
     gallery_count = meta["config"]["report"]["gallery"]
     figures.mkdir(parents=True, exist_ok=True)
-    results, timing = report_numbers(records, gallery_count)
+    # the campaign's names (its config lists every planner in order), as its tables show them
+    names = display_names([*meta["config"]["planners"], *(r["planner"] for r in records)])
+    results, timing = report_numbers(records, gallery_count, names)
     attacks = {a["label"] or a["name"]: a["name"] for a in meta["config"]["attacks"]}
     categories = {label: attack_entry(name).category for label, name in attacks.items()}
     categories.update({r["attack"]: r["attack_category"] for r in records if "attack_category" in r})
@@ -142,8 +147,9 @@ def make_report(campaign_dir: Path, out_dir: Path | None = None) -> dict:
 
     # The worst scenes that collided are animated (their pages and the gallery show the GIF).
     animate = {w["job_id"] for w in results["worst"] if w["collided"]}
-    media = {r["job_id"]: job_media(campaign_dir / "artifacts" / f"{r['job_id']}.npz", current_names(r),
-                                    out_dir, r["job_id"] in animate) for r in records}
+    media = {r["job_id"]: job_media(campaign_dir / "artifacts" / f"{r['job_id']}.npz",
+                                    _named(current_names(r), names), out_dir, r["job_id"] in animate)
+             for r in records}
     gallery = []
     for rank, worst in enumerate(results["worst"]):
         artifact = campaign_dir / "artifacts" / f"{worst['job_id']}.npz"
@@ -168,6 +174,7 @@ def make_report(campaign_dir: Path, out_dir: Path | None = None) -> dict:
         "report_provenance": provenance(), "versions": versions(),
     }
     jobs = [{"job_id": r["job_id"], "page": job_page(r["job_id"]), "planner": r["planner"],
+             "planner_name": names[r["planner"]],
              "env_id": r["env_id"], "scene_seed": r["scene_seed"], "episode": r["episode"],
              "attack": r["attack"], "status": r["status"], "outcome": outcome(current_names(r)),
              "animated": bool(media[r["job_id"]]["gif"]),
@@ -176,7 +183,7 @@ def make_report(campaign_dir: Path, out_dir: Path | None = None) -> dict:
     report["pages"] = {j["job_id"]: j["page"] for j in jobs}
     write_json(out_dir / "report.json", report)
     env = _environment()
-    _write_job_pages(env, out_dir, records, media, {g["job_id"]: g for g in gallery}, gallery_count)
+    _write_job_pages(env, out_dir, records, media, {g["job_id"]: g for g in gallery}, gallery_count, names)
     html = env.get_template("report.html.j2").render(
         r=report, gallery=gallery, jobs=jobs, attack_notes=attack_notes, collision_types=COLLISION_TYPES,
         config_json=json.dumps(meta["config"], indent=2))
@@ -184,8 +191,13 @@ def make_report(campaign_dir: Path, out_dir: Path | None = None) -> dict:
     return report
 
 
+def _named(record: dict, names: dict[str, str]) -> dict:
+    """A copy of `record` with its planner's display name (the stored record stays as it is)."""
+    return {**record, "planner_name": names[record["planner"]]}
+
+
 def _write_job_pages(env, out_dir: Path, records: list[dict], media: dict, gallery: dict,
-                     gallery_count: int) -> None:
+                     gallery_count: int, names: dict[str, str]) -> None:
     """OUT/jobs/JOB_ID.html for every job: its pictures and its record as stored."""
     template = env.get_template("job.html.j2")
     (out_dir / "jobs").mkdir(parents=True, exist_ok=True)
@@ -195,7 +207,8 @@ def _write_job_pages(env, out_dir: Path, records: list[dict], media: dict, galle
         if media[job_id]["attack_panel"]:
             entry = entry and {**entry, "panel": None}     # the gallery's panel is the attack's own
         html = template.render(
-            record=record, title=job_title(record), outcome=outcome(current_names(record)),
+            record=record, title=job_title(_named(record, names)), planner_name=names[record["planner"]],
+            outcome=outcome(current_names(record)),
             failure_text=(failure_explanation(record.get("failure") or unknown_failure())
                           if record.get("collided") else None),
             media=media[job_id], panel=entry and entry["panel"] and f"../{entry['panel']}",

@@ -18,7 +18,7 @@ from itertools import permutations
 
 import numpy as np
 
-from adversary.report.figures import short_spec
+from adversary.report.numbers import planner_name
 
 MAX_RANKED = 3            # disjoint pairs spelt out; the rest are counted
 MAX_PLACES = 3            # cells named where a planner collides most
@@ -63,8 +63,8 @@ def _places(rows: list[dict]) -> str:
     return f"under {text}" + (f" and {more} more" if more > 0 else "")
 
 
-def _planner_sentence(planner: str, rows: list[dict], categories: dict, first: bool, metric: str) -> str:
-    name, words = short_spec(planner), WORDS[metric]
+def _planner_sentence(rows: list[dict], categories: dict, first: bool, metric: str) -> str:
+    name, words = planner_name(rows[0]), WORDS[metric]
     k = sum(r[metric]["k"] for r in rows)
     n = sum(r[metric]["n"] for r in rows)
     if k == 0:
@@ -111,7 +111,7 @@ def _ranking(cells: list[dict], metric: str) -> list[str]:
                  f"attack and family, a 95% interval spans {width:.0f} points (median), and every "
                  f"pair of planners run on the same family and attack overlaps; more episodes per "
                  f"scene family would be needed to separate them.")]
-    said = [f"{short_spec(a['planner'])} {WORDS[metric]['more']} {short_spec(b['planner'])} "
+    said = [f"{planner_name(a)} {WORDS[metric]['more']} {planner_name(b)} "
             f"{_where(a)} ({_pct(a[metric])} against {_pct(b[metric])}, "
             f"intervals disjoint)" for a, b in disjoint[:MAX_RANKED]]
     more = len(disjoint) - MAX_RANKED
@@ -148,7 +148,7 @@ def summary_paragraph(by_family: list[dict], categories: dict[str, str], failed:
     # "fails most" only for a planner ahead of the next one (not for a tie)
     alone = worst[order[0]] > 0 and (len(order) == 1 or (worst[order[0]], share[order[0]])
                                      != (worst[order[1]], share[order[1]]))
-    sentences += [_planner_sentence(p, by_planner[p], categories, i == 0 and alone, metric)
+    sentences += [_planner_sentence(by_planner[p], categories, i == 0 and alone, metric)
                   for i, p in enumerate(order)]
     ranking = _ranking(cells, metric)
     sentences += ranking

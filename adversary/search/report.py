@@ -22,6 +22,7 @@ import numpy as np
 
 from adversary.search.scenarios import Template, get_template
 from riskmap.infra.atomic import write_json
+from riskmap.registry import display_name
 from riskmap.sim.failures import summarise_failures
 
 
@@ -164,7 +165,7 @@ def render_failure_frames(template: Template, record: dict, config: dict, out_di
         remaining_s = (last - step) / evaluation.control_hz
         future_s = min(3.0, np.floor(remaining_s / 0.5) * 0.5)
         scene = recorder.scene(step, 2.0, future_s, source=ENV_ID)
-        title = (f"{config['planner']} on {template.name}, t = {step / evaluation.control_hz:.1f} s "
+        title = (f"{display_name(config['planner'])} on {template.name}, t = {step / evaluation.control_hz:.1f} s "
                  f"({outcome} at {drive['simulated_s']:.1f} s)")
         paths.append(save_scene_png(scene, raster, out_dir / f"frame_{step:04d}.png", title))
     return paths

@@ -252,7 +252,7 @@ def search(config: SearchConfig, out: Path, resume: bool = False, progress: bool
     from tqdm import tqdm
 
     from adversary.search.report import write_report
-    from riskmap.registry import make_planner
+    from riskmap.registry import display_name, make_planner
 
     out = Path(out)
     make_planner(config.planner, seed=config.seed)   # a bad SPEC fails here, before --out exists
@@ -276,7 +276,7 @@ def search(config: SearchConfig, out: Path, resume: bool = False, progress: bool
     try:
         batches = generations(problem, config)
         for generation, batch in enumerate(tqdm(batches, total=config.gen, disable=not progress,
-                                                desc=f"{config.algorithm} {config.planner} "
+                                                desc=f"{config.algorithm} {display_name(config.planner)} "
                                                      f"{config.template}")):
             keys = [evaluation_key(x) for x in batch.get("X")]
             write_json(out / "generations" / f"gen_{generation:03d}.json",

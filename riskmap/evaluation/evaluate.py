@@ -12,7 +12,9 @@ human's start, along the human's route:
 plays the record back through the harness (log mode only). Metrics per episode
 (`riskmap.sim.metrics`) go to OUT/episodes/<planner>/episode_NNNNNN.json as each finishes; at the end
 OUT/episodes.csv (one row per planner and episode), OUT/results.json (mean and 90th percentile
-over episodes) and OUT/table.md. `--resume` skips every file already written.
+over episodes) and OUT/table.md. `--resume` skips every file already written. The table shows
+each planner by its display name (`riskmap.registry.display_names`); the CSV and results.json
+carry the whole SPEC beside it, and the episode folders stay named by the SPEC (`planner_slug`).
 """
 
 from __future__ import annotations
@@ -32,7 +34,7 @@ from riskmap.infra.atomic import atomic_write, write_json
 from riskmap.infra.parallel import run_parallel
 from riskmap.infra.provenance import provenance
 from riskmap.infra.rundir import claim_out_dir
-from riskmap.registry import cached_planner
+from riskmap.registry import cached_planner, display_name, display_names
 from riskmap.sim.episode import FAMILY_SETUPS, cached_env
 from riskmap.sim.failures import summarise_failures
 from riskmap.sim.metrics import (
@@ -52,7 +54,7 @@ MODES = ("log", "reactive")
 # Per-episode values summarised as mean and 90th percentile over episodes.
 METRICS = ("safety_pct", "ade_m", "goal_error_m", "distance_m", "jerk_mps3", "plan_ms_mean")
 RATES = ("collided", "off_road")
-CSV_FIELDS = ("planner", "label", "episode", "mode", "collided", "off_road", "safety_pct", "dangerous",
+CSV_FIELDS = ("planner", "name", "label", "episode", "mode", "collided", "off_road", "safety_pct", "dangerous",
               "encounters", "ade_m", "goal_error_m", "distance_m", "jerk_mps3", "simulated_s",
               "plan_ms_mean", "plan_ms_p90", "plan_calls")
 
@@ -79,6 +81,7 @@ class EvalConfig:
             raise InputError("--episodes must be at least 1")
         if not self.planners or len(set(self.planners)) != len(self.planners):
             raise InputError(f"--planners {','.join(self.planners)!r}: give each planner SPEC once")
+        display_names(self.planners)      # a bad or repeated name= fails before any work
         if self.mode == "reactive" and "replay" in self.planners:
             raise InputError("planner `replay` plays back the record, which reactive traffic no longer "
                              "follows; use it with --mode log only")
@@ -90,13 +93,18 @@ class EvalConfig:
 
 
 def planner_label(spec: str) -> str:
-    """The Table I name of a planner SPEC."""
+    """The Table I name of a planner SPEC (the paper's row names; other planners: their
+    display name)."""
     kind = spec.partition(":")[0].replace("-", "_")
     return {"idm": "Human", "replay": "Replay", "cv": "CV", "riskmap": "Risk-aware (ours)",
-            "cnn": "CNN", "cnn_lstm": "CNN-LSTM", "rvsg": "RvS-G"}.get(kind, spec)
+            "cnn": "CNN", "cnn_lstm": "CNN-LSTM", "rvsg": "RvS-G"}.get(kind) or display_name(spec)
 
 
 def planner_slug(spec: str) -> str:
+    """The folder of a planner's episode records, made from the whole SPEC, not its display
+    name: `--resume` finds finished episodes by it, and a display name depends on the other
+    planners of the run (`-2` suffixes) and on `name=`, so adding a planner or renaming one on
+    resume could hand one planner's records to another. Folders of earlier runs keep resuming."""
     return re.sub(r"[^A-Za-z0-9]+", "_", spec).strip("_")
 
 
@@ -215,11 +223,12 @@ def _run_planner_task(config: EvalConfig, out: Path, spec: str, episode: int) ->
 def summarise(config: EvalConfig, records: list[dict]) -> dict:
     """Per planner: mean and 90th percentile over episodes, rates, pooled Safety %."""
     table = {}
+    names = display_names(config.planners)
     for spec in config.planners:
         rows = [r for r in records if r["planner"] == spec]
         if not rows:
             continue
-        entry = {"label": planner_label(spec), "episodes": len(rows)}
+        entry = {"name": names[spec], "label": planner_label(spec), "episodes": len(rows)}
         for key in METRICS:
             entry[key] = summarise_metric([r[key] for r in rows])
         for key in RATES:
@@ -258,7 +267,7 @@ def markdown_table(config: EvalConfig, table: dict) -> str:
             return f"{_fmt(entry[key]['mean'], digits)} / {_fmt(entry[key]['p90'], digits)}"
 
         lines.append(
-            f"| {entry['label']} | {entry['episodes']} | {pair('safety_pct', 1)} | {pair('ade_m')} | "
+            f"| {entry['name']} | {entry['episodes']} | {pair('safety_pct', 1)} | {pair('ade_m')} | "
             f"{pair('goal_error_m')} | {100 * entry['collided_rate']:.0f}% ({_counted(entry)}) | "
             f"{100 * entry['off_road_rate']:.0f}% | {pair('distance_m', 0)} | {pair('jerk_mps3')} | "
             f"{pair('plan_ms_mean', 1)} |")
@@ -294,7 +303,8 @@ def evaluate(config: EvalConfig, out: Path, workers: int = 1, resume: bool = Fal
     for _ in run_parallel(_planner_task, [(config, out, s, e) for s, e in todo], workers):
         bar.update()
     bar.close()
-    records = [current_names(json.loads(_result_path(out, s, e).read_text()))
+    names = display_names(config.planners)      # this run's names, whatever earlier runs used
+    records = [{**current_names(json.loads(_result_path(out, s, e).read_text())), "name": names[s]}
                for s in config.planners for e in range(config.episodes)]
     atomic_write(out / "episodes.csv", lambda f: f.write(_csv_text(list(CSV_FIELDS), records).encode()))
     table = summarise(config, records)

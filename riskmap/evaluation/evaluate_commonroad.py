@@ -7,7 +7,9 @@ record and driven to the end of it, among the other recorded vehicles replaying 
 (`riskmap.sim.commonroad_replay`, a highway-env road built from the lanelets): by time in `log`
 mode, along their paths braking for the ego in `reactive` mode. Per planner and
 episode OUT/episodes/<planner>/<scenario>_<vehicle>.json (atomic; `--resume` skips finished
-ones), then OUT/results.json and OUT/table.md with means and 90th percentiles.
+ones), then OUT/results.json and OUT/table.md with means and 90th percentiles. The table names
+each planner by its display name (`riskmap.registry.display_names`), results.json by its SPEC and
+that name; the episode folders keep the SPEC's (`riskmap.evaluation.evaluate.planner_slug`).
 
 `replay` is the recording itself, tracked by the same controller: the harness's error floor.
 `idm` is the rule-based baseline: IDM + MOBIL along the recorded vehicle's lanelets
@@ -46,6 +48,7 @@ from riskmap.evaluation.evaluate import planner_slug
 from riskmap.infra.atomic import atomic_write, write_json
 from riskmap.infra.parallel import run_parallel
 from riskmap.infra.rundir import claim_out_dir
+from riskmap.registry import display_names
 from riskmap.sim.record import current_names
 from riskmap.sim.failures import summarise_failures
 
@@ -132,13 +135,15 @@ def _count(value) -> str:
 
 
 def markdown_table(results: dict) -> str:
+    """The table of `results` ({SPEC: summary}), a row per planner under its display name."""
+    names = display_names(results)
     lines = [("| planner | episodes | Safety % (danger) | safe episodes % | collisions (that count: at fault and "
               "avoidable; at fault / struck from behind / side) | red-light violations (human) | off-road | ADE (m) | "
               "goal error (m) | driven (m) | human (m) |"),
              "|---|---|---|---|---|---|---|---|---|---|---|"]
     for spec, s in results.items():
         lines.append(
-            f"| {spec} | {s['episodes']} | {s['safety_pct']['mean']:.1f} / {s['safety_pct']['p90']:.1f} | "
+            f"| {names[spec]} | {s['episodes']} | {s['safety_pct']['mean']:.1f} / {s['safety_pct']['p90']:.1f} | "
             f"{s['safe_episodes_pct']:.0f} | "
             f"{100 * s['collision_rate']:.0f}% ({_count(s.get('counted'))}; {s['at_fault']} / "
             f"{s['struck_from_behind']} / {_count(s.get('side'))}"
@@ -183,6 +188,7 @@ def evaluate_commonroad(recordings: list[str | Path], planners: tuple[str, ...],
         if limit < len(episodes):
             keep = np.sort(np.random.default_rng(seed).choice(len(episodes), limit, replace=False))
             episodes = [episodes[i] for i in keep]
+    names = display_names(planners)       # a bad or repeated name= fails here too
     for spec in planners:           # a bad SPEC fails here, before anything is written
         if spec not in ("replay", "idm"):       # these two are made per recorded vehicle
             _planner(spec, None, 0, seed, goal_variance)
@@ -203,7 +209,7 @@ def evaluate_commonroad(recordings: list[str | Path], planners: tuple[str, ...],
     bar.close()
     records = {spec: [current_names(json.loads(_episode_path(out, spec, name, vehicle).read_text()))
                       for _, name, vehicle in episodes] for spec in planners}
-    results = {spec: summarise(rs) for spec, rs in records.items()}
+    results = {spec: {"name": names[spec], **summarise(rs)} for spec, rs in records.items()}
     write_json(out / "results.json", {**meta, "results": results})
     atomic_write(out / "table.md", lambda f: f.write(markdown_table(results).encode()))
     return results

@@ -85,8 +85,8 @@ def test_evaluate_writes_tables_and_resumes_without_recomputing(tmp_path, monkey
         assert results[spec]["ade_m"]["mean"] == 0.0 and results[spec]["goal_error_m"]["mean"] == 0.0
     assert results["replay"]["safety_pct"] == results["idm"]["safety_pct"]
     rows = (out / "episodes.csv").read_text().splitlines()
-    assert len(rows) == 1 + 4 and rows[0].startswith("planner,label,episode")
-    assert "| Human | 2 |" in (out / "table.md").read_text()
+    assert len(rows) == 1 + 4 and rows[0].startswith("planner,name,label,episode")
+    assert "| idm | 2 |" in (out / "table.md").read_text()
     assert main(args) == 2                                  # refuses to overwrite without --resume
 
     # Resuming finished work recomputes nothing; adding a planner computes only that planner.
@@ -140,6 +140,22 @@ def test_replan_hz_sets_how_often_the_planner_plans(tmp_path, hz):
     rows = (out / "episodes.csv").read_text().splitlines()
     record = dict(zip(rows[0].split(","), rows[1].split(",")))
     assert int(record["plan_calls"]) == 2 * hz             # 2 s of driving
+
+
+def test_the_table_shows_display_names_and_the_records_keep_the_spec():
+    named = "py:tests.broken_planners:Broken?fault=kmh&name=gk"
+    config = EvalConfig(ENV, ("idm", "riskmap:a/best", "riskmap:b/best", named), 1)
+    row = {"collided": False, "off_road": False, "failure": None, "dangerous": 0, "encounters": 1,
+           **{key: 1.0 for key in evaluate_module.METRICS}}
+    table = evaluate_module.summarise(config, [{**row, "planner": spec} for spec in config.planners])
+    assert list(table) == list(config.planners)                      # results.json: by SPEC
+    assert [entry["name"] for entry in table.values()] == ["idm", "best", "best-2", "gk"]
+    text = evaluate_module.markdown_table(config, table)
+    assert "| gk | 1 |" in text and "| best-2 | 1 |" in text and "py:" not in text
+    # episode folders stay named by the SPEC: --resume finds earlier runs' records there
+    assert evaluate_module.planner_slug(named) == "py_tests_broken_planners_Broken_fault_kmh_name_gk"
+    with pytest.raises(InputError, match="name='a/b'"):
+        EvalConfig(ENV, ("cv", "py:tests.broken_planners:Broken?name=a/b"), 1)
 
 
 def test_replan_hz_must_divide_the_control_rate():

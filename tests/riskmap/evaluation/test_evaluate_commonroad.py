@@ -104,6 +104,11 @@ def test_red_light_violations_are_summed_beside_collisions_with_the_human_refere
     del old["red_light_violations"], old["human_red_light_violations"]   # written before the count
     summary = summarise([record(1, 1), old])
     assert summary["red_light_violations"] is None and "| n/a (n/a) |" in markdown_table({"cv": summary})
+    # rows by display name: checkpoints by stem (told apart), a py: plug-in by its name=
+    table = markdown_table({"riskmap:a/best": summary, "riskmap:b/best": summary,
+                            "py:riskmap_example_planner:GapKeeper?headway_s=2&name=gk2": summary})
+    assert "| best | 2 |" in table and "| best-2 | 2 |" in table and "| gk2 | 2 |" in table
+    assert "riskmap:" not in table and "py:" not in table
 
 
 def test_replan_hz_reaches_every_recorded_episode(tmp_path):
