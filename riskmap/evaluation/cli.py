@@ -120,7 +120,8 @@ def add_parsers(sub) -> None:
     p.add_argument("--episodes", type=positive_int, required=True)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--out", required=True)
-    p.add_argument("--frames", action="store_true", help="write a PNG per replan")
+    p.add_argument("--frames", action="store_true",
+                   help="write a PNG per replan (OUT/frames): the scene and the plan")
     p.add_argument("--goal-variance", type=positive_float, default=None,
                    help="cells²; planning-time goal variance of a risk-map planner (default: the "
                         "checkpoint's)")

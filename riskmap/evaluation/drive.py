@@ -13,14 +13,12 @@ from pathlib import Path
 
 import numpy as np
 
-from rasterize.errors import InputError
 from riskmap.figures.panels import plan_frame_writer
 from riskmap.infra.atomic import write_json
 from riskmap.infra.provenance import provenance
 from riskmap.infra.rundir import claim_out_dir
-from riskmap.registry import make_planner
+from riskmap.registry import display_name, make_planner
 from riskmap.sim.episode import make_env
-from riskmap.sim.plan import drives_itself
 from riskmap.sim.record import current_names
 from riskmap.sim.rollout import DriveConfig, DriveHooks, drive_episode
 
@@ -59,9 +57,6 @@ def drive(config: DriveConfig, planner_spec: str, out: Path, resume: bool = Fals
 
     out = Path(out)
     planner = make_planner(planner_spec, seed=config.seed, goal_variance=goal_variance)
-    if frames and drives_itself(planner):
-        raise InputError(f"--frames draws each plan, and {planner_spec} makes none (the simulator's own "
-                         "IDM/MOBIL drives the ego): leave out --frames, or drive a planner that plans")
     episodes_dir = out / "episodes"
     meta = {"config": asdict(config), "planner": planner_spec}
     if goal_variance is not None:
@@ -71,14 +66,14 @@ def drive(config: DriveConfig, planner_spec: str, out: Path, resume: bool = Fals
     meta.update(provenance())
     env = make_env(config.env_id, config.control_hz)
     records = []
-    for episode in tqdm(range(config.episodes), disable=not progress, desc=f"drive {planner_spec}"):
+    for episode in tqdm(range(config.episodes), disable=not progress, desc=f"drive {display_name(planner_spec)}"):
         path = episodes_dir / f"episode_{episode:06d}.json"
         if resume and path.exists():
             records.append(current_names(json.loads(path.read_text())))
             continue
         hooks = DriveHooks(on_plan=plan_frame_writer(
             out / "frames", planner, f"episode_{episode:06d}", f"{config.env_id} episode {episode}",
-            config.env_id)
+            config.env_id, name=display_name(planner_spec))
             if frames else None)
         record = drive_episode(env, planner, config, episode, hooks)
         write_json(path, record)

@@ -53,8 +53,10 @@ def raster_to_rgb(raster: np.ndarray) -> np.ndarray:
 
 
 def save_plan_png(scene: Scene, plan, config: RasterConfig, path: Path, title: str = "") -> Path:
-    """A closed-loop frame: the scene with the plan's 12 waypoints on top."""
-    return save_scene_png(scene, config, path, title, plan_waypoints=plan.waypoints)
+    """A closed-loop frame: the scene with the plan's 12 waypoints on top (the scene alone where
+    `plan` is None: an ego that drives itself)."""
+    return save_scene_png(scene, config, path, title,
+                          plan_waypoints=None if plan is None else plan.waypoints)
 
 
 def save_scene_png(scene: Scene, config: RasterConfig, path: Path, title: str = "",
@@ -297,16 +299,33 @@ def save_spacetime_strip(plan, grid, path: Path, title: str = "",
     return _save(fig, path)
 
 
-def plan_frame_writer(out_dir: Path, planner, stem: str, label: str, env_id: str):
+def plan_frame_writer(out_dir: Path, planner, stem: str, label: str, env_id: str,
+                      name: str | None = None):
     """A rollout `on_plan` hook (riskmap.sim.rollout.DriveHooks) that writes one PNG per replan,
     `out_dir/{stem}_tNNNN.png` (NNNN: the control step), titled `{label} t = …`. A planner
-    without a raster of its own (constant velocity, a `py:` plug-in) is drawn on a raster of
-    `env_id`'s family extent."""
+    without a raster of its own (constant velocity, a `py:` plug-in, IDM) is drawn on a raster
+    of `env_id`'s family extent. A frame whose plan has no risk map says so in its title,
+    naming the planner (`name`, default its class)."""
     from rasterize.config import FAMILY_EXTENTS, family_of_env
 
-    raster = getattr(planner, "raster", None) or RasterConfig(FAMILY_EXTENTS[family_of_env(env_id)])
+    raster = getattr(planner, "raster", None)
+    if not isinstance(raster, RasterConfig):   # a plug-in may use the name for something else
+        raster = RasterConfig(FAMILY_EXTENTS[family_of_env(env_id)])
+    name = name or type(planner).__name__
 
     def write(run, scene, plan, step: int) -> None:
+        title = f"{label} t = {run.time_s:.1f} s"
+        note = missing_maps_note(plan, name)
         save_plan_png(scene, plan, raster, Path(out_dir) / f"{stem}_t{step:04d}.png",
-                      f"{label} t = {run.time_s:.1f} s")
+                      f"{title}\n{note}" if note else title)
     return write
+
+
+def missing_maps_note(plan, name: str) -> str:
+    """What a frame of `plan` by planner `name` lacks, for its title: "" for a plan with a risk
+    map, so that a risk-map planner's frames stay as they were."""
+    if plan is None:
+        return f"no plan, no risk map: {name} drives itself"
+    if getattr(plan, "risk_map", None) is None:
+        return f"no risk map: {name}"
+    return ""

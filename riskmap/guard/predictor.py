@@ -19,10 +19,10 @@ class AccidentPredictor:
 
     @classmethod
     def load(cls, path: str | Path) -> AccidentPredictor:
-        from riskmap.infra.checkpoint import load_weights, read_sidecar
+        from riskmap.infra.checkpoint import load_weights, read_sidecar, sidecar_section
 
         side = read_sidecar(Path(path), kind=CHECKPOINT_KIND)   # missing, damaged, other kind
-        model = load_weights(TGAT(TGATConfig(**side["model"])), Path(path),
+        model = load_weights(TGAT(sidecar_section(side, "model", path, TGATConfig)), Path(path),
                              "train it again with `riskmap guard train` or use checkpoints/guard_tgat")
         return cls(model, side["alert_threshold"])
 

@@ -161,14 +161,33 @@ def route_settings_of(sidecar: dict) -> dict | None:
 def sidecar_section(data: dict, name: str, path: Path, build=dict):
     """`build(**data[name])`: one section of checkpoint `path`'s sidecar, made into its config
     (`build`, e.g. a frozen config dataclass); a missing or malformed section (an edited or
-    truncated sidecar) is an InputError naming the checkpoint and the section."""
-    section = data.get(name)
-    if not isinstance(section, dict):
-        raise InputError(f"checkpoint {path}: its sidecar {Path(path).with_suffix('.json').name} has no "
-                         f"{name!r} section (edited or truncated); use the .json that training wrote")
+    truncated sidecar) is an InputError naming the sidecar and the section."""
+    require_sections(data, path, {name: ()})
     try:
-        return build(**section)
+        return build(**data[name])
     except (TypeError, ValueError) as error:
-        raise InputError(f"checkpoint {path}: the {name!r} section of its sidecar does not fit this "
-                         f"version ({error}); use the .json that training wrote") from None
+        raise InputError(f"checkpoint {path}: the {name!r} section of its sidecar does not fit "
+                         f"this version ({error}); {_sidecar_fix(path)}") from None
 
+
+def require_sections(data: dict, path: Path, sections: dict[str, tuple[str, ...]]) -> None:
+    """Check that checkpoint `path`'s sidecar holds each of `sections` as a mapping with at least
+    the keys listed for it, so that a loader reading them fails in one line naming the sidecar
+    (an edited or truncated one) instead of with a KeyError halfway through."""
+    for name, keys in sections.items():
+        section = data.get(name)
+        if not isinstance(section, dict):
+            raise InputError(f"checkpoint {path}: its sidecar has no {name!r} section (edited or "
+                             f"truncated); {_sidecar_fix(path)}")
+        missing = [key for key in keys if key not in section]
+        if missing:
+            raise InputError(f"checkpoint {path}: the {name!r} section of its sidecar has no "
+                             f"{', '.join(map(repr, missing))} (edited or truncated); "
+                             f"{_sidecar_fix(path)}")
+
+
+def _sidecar_fix(path: Path) -> str:
+    """What to do about a sidecar that lacks what its loader needs: only training writes a whole
+    one. Names the file as `read_sidecar` found it."""
+    sidecar = resolve_checkpoint(path).with_suffix(".json")
+    return f"use the {sidecar} that training wrote, or train the checkpoint again"

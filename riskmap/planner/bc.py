@@ -153,10 +153,11 @@ def bc_inputs(scene: Scene, config: BCConfig, raster: RasterConfig) -> tuple[np.
 
 def load_bc(path: str | Path) -> tuple[BCNet, dict]:
     """A trained baseline network (eval mode) and its sidecar."""
-    from riskmap.infra.checkpoint import load_weights, read_sidecar
+    from riskmap.infra.checkpoint import load_weights, read_sidecar, require_sections, sidecar_section
 
     side = read_sidecar(Path(path), kind=CHECKPOINT_KIND)
-    model = load_weights(BCNet(BCConfig(**side["bc"])), Path(path),
+    require_sections(side, path, {"raster": ()})          # read by BCPlanner.load
+    model = load_weights(BCNet(sidecar_section(side, "bc", path, BCConfig)), Path(path),
                          "train it again with `riskmap train-baseline`")
     return model, side
 

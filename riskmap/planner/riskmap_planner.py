@@ -20,13 +20,18 @@ from rasterize.maps import (
 )
 from rasterize.raster import rasterize_scene
 from rasterize.scene import Scene
-from riskmap.infra.checkpoint import route_settings_of
+from riskmap.infra.checkpoint import require_sections, route_settings_of
 from riskmap.planner.gap_keeping import keep_gap
 from riskmap.planner.irl import goal_log_map
 from riskmap.planner.risk_goal import RiskGoalConfig, risk_goal_cell
 from riskmap.planner.sampler import SamplerConfig, sample_trajectory
 from riskmap.planner.vi import soft_value_iteration, state_visitation
 from riskmap.sim.plan import Plan
+
+
+# What planning reads from a spatial checkpoint's sidecar besides the network's own sections
+# (`load_model` checks those): section -> the keys it cannot do without.
+PLANNING_SECTIONS = {"grid": (), "irl": ("goal_variance", "horizon", "gamma"), "sampler": ()}
 
 
 def sampler_of(side: dict) -> SamplerConfig:
@@ -106,6 +111,7 @@ class RiskMapPlanner:
         from riskmap.planner.model import load_model
 
         model, side = load_model(Path(checkpoint))
+        require_sections(side, checkpoint, PLANNING_SECTIONS)
         variance = goal_variance
         if variance is None:
             variance = side.get("planning", {}).get("goal_variance", side["irl"]["goal_variance"])

@@ -22,12 +22,16 @@ from rasterize.maps import goal_map, motion_features, route_goal_cell, start_cel
 from rasterize.raster import rasterize_scene
 from rasterize.scene import Scene
 from rasterize.spacetime import quantised, step_evidence
-from riskmap.infra.checkpoint import route_settings_of
+from riskmap.infra.checkpoint import require_sections, route_settings_of
 from riskmap.planner.irl import goal_log_map
 from riskmap.planner.st_model import SpaceTimeConfig, load_spacetime_model
 from riskmap.planner.st_sampler import SpaceTimeSamplerConfig, spacetime_plan
 from riskmap.planner.st_vi import spacetime_value_iteration, spacetime_visitation
 from riskmap.sim.plan import Plan
+
+# What planning reads from a space-time checkpoint's sidecar besides the network's own sections
+# (`load_spacetime_model` checks those): section -> the keys it cannot do without.
+PLANNING_SECTIONS = {"grid": (), "irl": ("goal_variance",), "maps": ("sigma_x", "sigma_y")}
 
 
 @dataclass(frozen=True)
@@ -89,6 +93,7 @@ class SpaceTimePlanner:
         the route goal on at weight 1 where the sidecar leaves it off, since without the pull
         the learned goal map ignores the variance and the option would do nothing."""
         model, side = load_spacetime_model(Path(checkpoint))
+        require_sections(side, checkpoint, PLANNING_SECTIONS)
         variance = goal_variance
         if variance is None:
             variance = side.get("planning", {}).get("goal_variance", side["irl"]["goal_variance"])

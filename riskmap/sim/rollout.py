@@ -66,7 +66,8 @@ class DriveHooks:
     perceive(scene, step) -> scene: what the planner is shown instead of the recorded scene
         (perception degradation); frames still show the recorded scene.
     on_plan(run, scene, plan, step): after every replan, with the scene the plan was made from
-        (figures: `riskmap.figures.panels.plan_frame_writer`).
+        (figures: `riskmap.figures.panels.plan_frame_writer`); where the ego drives itself, at
+        the same times with `plan` None.
     on_step(run): after every control step (measurements, trajectory logging).
     on_end(run, record): once, after the last step, with the loop's `LoopRecord`.
     """
@@ -158,6 +159,9 @@ def drive_world(world, planner, config: LoopConfig, hooks: DriveHooks = DriveHoo
     for k in range(config.steps):
         if tracker is not None:
             tracker.command(k)
+        elif hooks.on_plan is not None and k % config.replan_every == 0:
+            # A self-driving ego makes no plan, but frames of its drive are still wanted.
+            hooks.on_plan(world, world.scene(config.history_s), None, k)
         before = world.ego.position.copy()
         world.step()
         distance += float(np.linalg.norm(world.ego.position - before))

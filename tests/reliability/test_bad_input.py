@@ -50,6 +50,9 @@ FOUND (findings this sweep made, each fixed in the library; one line each):
   were not named; a mismatch message could span lines (infra/cli.py, infra/checkpoint.py).
 - evaluate --planners "," said "give each SPEC once"; --episode-s inf was not refused
   (evaluation/cli.py, evaluation/evaluate.py).
+- a sidecar without its grid, irl (or irl.horizon), sampler, maps or bc section: KeyError traceback
+  (drive, evaluate): each planner's loader names the sections it reads (require_sections), one
+  line naming the checkpoint and its sidecar (infra/checkpoint.py, planner/*).
 - validating before creating --out must not lose "a second writer stops at once": the lock is
   probed, without creating anything, before inputs are read (infra/rundir.py refuse_if_locked).
 """
@@ -275,6 +278,14 @@ class Fixtures:
             content = json.loads(sidecar.read_text())
             content["kind"] = None
             sidecar.write_text(json.dumps(content))
+        elif variant.startswith("without_"):     # without_model, without_irl.horizon: a part left out
+            content = json.loads(sidecar.read_text())
+            *parents, name = variant.removeprefix("without_").split(".")
+            section = content
+            for key in parents:
+                section = section[key]
+            del section[name]
+            sidecar.write_text(json.dumps(content))
         elif variant == "nan_weights":
             _poison_weights(target, float("nan"))
         elif variant == "inf_weights":
@@ -361,6 +372,9 @@ class Fixtures:
             "planner_missing": good.replace("[cv]", "['riskmap:/nonexistent/ck']"),
             "planner_py_key": good.replace(
                 "[cv]", "['py:riskmap.planner.baselines:ConstantVelocityPlanner?nosuch=1']"),
+            "planner_name_twice": good.replace(
+                "[cv]", "['py:riskmap.planner.baselines:ConstantVelocityPlanner?name=ego', "
+                        "'py:tests.broken_planners:Broken?name=ego']"),
             "planner_guard_ck": good.replace(
                 "[cv]", f"['riskmap:{self.checkpoint('guard_tgat')}']"),
             "episodes_negative": good.replace("episodes: 1", "episodes: -1"),
@@ -567,9 +581,11 @@ EMPTY = lambda fx, t: fx.empty
 FILE = lambda fx, t: fx.file
 RM = "checkpoints/riskmap_intersection"     # the riskmap checkpoint of the intersection data
 RM_SRC = "riskmap_intersection"
+RM_ST_SRC = "riskmap_st_intersection"       # the space-time planner of the same data
 GUARD_SRC = "guard_tgat"
 TRAFFIC_SRC = "crash_traffic_intersection"
 BC_SRC = "bc_cnn_intersection"
+CV_PY = "py:riskmap.planner.baselines:ConstantVelocityPlanner"    # a py: SPEC that loads at once
 
 COLLECT = ("riskmap", "collect")
 TRAIN = ("riskmap", "train")
@@ -771,6 +787,21 @@ add(
     drive_row("ck-inf-weights", ("--checkpoint", ck(RM_SRC, "inf_weights")), S(ck(RM_SRC, "inf_weights"))),
     drive_row("bc-nan-weights", ("--planner", lambda fx, t: f"cnn:{fx.checkpoint(BC_SRC, 'nan_weights')}"),
               S(ck(BC_SRC, "nan_weights"))),
+    drive_row("ck-without-model", ("--checkpoint", ck(RM_SRC, "without_model")), S(ck(RM_SRC, "without_model"))),
+    drive_row("ck-without-grid", ("--checkpoint", ck(RM_SRC, "without_grid")), S(ck(RM_SRC, "without_grid"))),
+    drive_row("ck-without-irl-horizon", ("--checkpoint", ck(RM_SRC, "without_irl.horizon")),
+              S(ck(RM_SRC, "without_irl.horizon"))),
+    drive_row("st-without-spacetime", ("--checkpoint", ck(RM_ST_SRC, "without_spacetime")),
+              S(ck(RM_ST_SRC, "without_spacetime"))),
+    drive_row("st-without-maps", ("--checkpoint", ck(RM_ST_SRC, "without_maps")), S(ck(RM_ST_SRC, "without_maps"))),
+    drive_row("bc-without-bc", ("--planner", lambda fx, t: f"cnn:{fx.checkpoint(BC_SRC, 'without_bc')}"),
+              S(ck(BC_SRC, "without_bc"))),
+    drive_row("frames-ck-without-model", ("--checkpoint", ck(RM_SRC, "without_model")),
+              S(ck(RM_SRC, "without_model")), "--frames"),
+    R("drive/frames-cv-env-unknown", _argv(*DRIVE, "--planner", "cv", "--frames", "--env", "nope-v0",
+                                           "--episodes", "1", "--out", OUT), S("nope-v0")),
+    drive_row("frames-py-unknown-key", ("--planner", "py:riskmap.planner.baselines:ConstantVelocityPlanner?nosuch=1"),
+              S("nosuch"), "--frames"),
     R("drive/env-unknown", _argv(*DRIVE, "--planner", "idm", "--env", "nope-v0", "--episodes", "1",
                                  "--out", OUT), S("nope-v0")),
     R("drive/episodes-zero", _argv(*DRIVE, "--planner", "idm", "--env", "highway-v0", "--episodes", "0",
@@ -794,6 +825,8 @@ add(
     R("check-planner/ck-nan-weights", _argv(*CHECK, lambda fx, t: f"riskmap:{fx.checkpoint(RM_SRC, 'nan_weights')}",
                                             "--envs", "highway-v0"), S(ck(RM_SRC, "nan_weights")), out=None),
     R("check-planner/env-unknown", _argv(*CHECK, "cv", "--envs", "nope-v0"), S("nope-v0"), out=None),
+    R("check-planner/spec-py-name-parent", _argv(*CHECK, f"{CV_PY}?name=..", "--envs", "highway-v0"),
+      S("name='..'"), out=None),
     R("check-planner/commonroad-missing", _argv(*CHECK, "cv", "--commonroad", missing("norec")),
       S(missing("norec")), out=None),
     R("check-planner/commonroad-png", _argv(*CHECK, "cv", "--commonroad", lambda fx, t: fx.png),
@@ -833,7 +866,16 @@ add(
     R("evaluate/planner-nan-weights", _argv(*EVAL, "--planners",
                                             lambda fx, t: f"riskmap:{fx.checkpoint(RM_SRC, 'nan_weights')}",
                                             *E_SIM, "--out", OUT), S(ck(RM_SRC, "nan_weights"))),
+    R("evaluate/planner-without-model", _argv(*EVAL, "--planners",
+                                              lambda fx, t: f"cv,riskmap:{fx.checkpoint(RM_SRC, 'without_model')}",
+                                              *E_SIM, "--out", OUT), S(ck(RM_SRC, "without_model"))),
     R("evaluate/planners-repeated", _argv(*EVAL, "--planners", "cv,cv", *E_SIM, "--out", OUT), S("--planners")),
+    R("evaluate/planner-name-path", _argv(*EVAL, "--planners", f"cv,{CV_PY}?name=runs/a", *E_SIM, "--out", OUT),
+      S("runs/a")),
+    R("evaluate/planner-name-empty", _argv(*EVAL, "--planners", f"{CV_PY}?headway_s=2&name=", *E_SIM,
+                                           "--out", OUT), S("name=")),
+    R("evaluate/planner-name-twice", _argv(*EVAL, "--planners", f"{CV_PY}?name=ego,py:tests.broken_planners:Broken"
+                                           "?name=ego", *E_SIM, "--out", OUT), S("name=ego")),
     R("evaluate/planners-empty", _argv(*EVAL, "--planners", ",", *E_SIM, "--out", OUT), S("--planners")),
     R("evaluate/env-unknown", _argv(*EVAL, "--planners", "cv", "--env", "nope-v0", "--episodes", "1",
                                     "--out", OUT), S("nope-v0")),
@@ -1024,6 +1066,7 @@ add(
     stress_row("planner-ck-missing", "planner_missing", S("/nonexistent/ck")),
     stress_row("planner-guard-ck", "planner_guard_ck", S(ck(GUARD_SRC))),
     stress_row("planner-py-unknown-key", "planner_py_key", S("nosuch")),
+    stress_row("planner-name-twice", "planner_name_twice", S("name=ego")),
     stress_row("episodes-negative", "episodes_negative", S("episodes")),
     stress_row("env-unknown", "env_nope", S("nope-v0")),
     stress_row("episode-s-negative", "episode_s_negative", S("episode_s")),

@@ -1,12 +1,16 @@
+import dataclasses
 import json
 
+import numpy as np
 import pytest
 
 from rasterize.errors import InputError
 from riskmap.data.collect import CollectConfig, run_episode
 from riskmap.evaluation.drive import drive
+from riskmap.figures.panels import missing_maps_note
 from riskmap.registry import make_planner
 from riskmap.sim.episode import make_env
+from riskmap.sim.plan import Plan
 from riskmap.sim.rollout import DriveConfig
 
 
@@ -42,9 +46,34 @@ def test_frames_of_a_planner_without_a_raster_and_of_one_that_makes_no_plans(tmp
     drive(config, "cv", tmp_path / "cv", frames=True, progress=False)       # drawn on the family's raster
     record = json.loads((tmp_path / "cv" / "episodes" / "episode_000000.json").read_text())
     assert len(list((tmp_path / "cv" / "frames").glob("*.png"))) == record["plan_calls"] >= 1
-    with pytest.raises(InputError, match="idm makes none"):
-        drive(config, "idm", tmp_path / "idm", frames=True, progress=False)
-    assert not (tmp_path / "idm").exists()                  # refused before anything is written
+    drive(config, "idm", tmp_path / "idm", frames=True, progress=False)     # the scene at replan times
+    record = json.loads((tmp_path / "idm" / "episodes" / "episode_000000.json").read_text())
+    assert record["plan_calls"] == 0
+    assert sorted(p.name for p in (tmp_path / "idm" / "frames").glob("*.png")) == [
+        f"episode_000000_t{k:04d}.png" for k in (0, 5, 10, 15)]
+
+
+def test_drive_frames_of_cv_from_the_command_line(tmp_path, monkeypatch):
+    from riskmap.cli import main
+    from riskmap.sim import rollout
+
+    # The command line has no episode length: a 2 s highway episode keeps this to four frames.
+    short = dataclasses.replace(rollout.FAMILY_SETUPS["highway"], episode_s=2.0)
+    monkeypatch.setitem(rollout.FAMILY_SETUPS, "highway", short)
+    out = tmp_path / "cv"
+    assert main(["drive", "--frames", "--planner", "cv", "--env", "highway-v0", "--episodes", "1",
+                 "--out", str(out), "--quiet"]) == 0
+    frames = sorted((out / "frames").glob("*.png"))
+    assert [p.name for p in frames] == [f"episode_000000_t{k:04d}.png" for k in (0, 5, 10, 15)]
+    assert all(p.read_bytes().startswith(b"\x89PNG") for p in frames)
+
+
+def test_a_frame_names_what_its_planner_lacks():
+    waypoints = np.zeros((12, 2))
+    assert missing_maps_note(Plan(waypoints), "cv") == "no risk map: cv"
+    assert missing_maps_note(None, "idm") == "no plan, no risk map: idm drives itself"
+    # A risk-map planner's frames keep their title as it was.
+    assert missing_maps_note(Plan(waypoints, risk_map=np.zeros((4, 4))), "riskmap:ck") == ""
 
 
 def test_unknown_spec():
