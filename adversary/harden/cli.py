@@ -48,6 +48,8 @@ HELP = {
     "demonstration": "which collision-free alternative demonstrates: safest (most room to every vehicle), "
                      "defensive (the same, never speeding up), lateral (the safest lane change where one is "
                      "clear) or mildest (least change from the attacked drive)",
+    "keep": "which epoch of a round's fine-tune becomes its planner: last, or best by open-loop ADE on the "
+            "natural validation windows (early stopping; default: %(default)s)",
     "replan_every": "k: the attack re-runs the planner every k iterations",
     "eval_scenes": "held-out attack scenes: every round's planner is attacked afresh on them",
     "eval_count": "held-out scenes attacked per round",
@@ -68,7 +70,7 @@ HELP = {
 
 
 def add_parsers(subparsers) -> None:
-    from adversary.harden.loop import HardenConfig
+    from adversary.harden.loop import KEEP, HardenConfig
     from adversary.harden.windows import DEMONSTRATIONS
     from adversary.search.scenarios import TEMPLATES
 
@@ -80,7 +82,7 @@ def add_parsers(subparsers) -> None:
                                                                      "natural_episodes", "workers",
                                                                      "batch_size", "replan_every",
                                                                      "ade_windows", "search_pop", "search_gen")},
-                       choices={"demonstration": DEMONSTRATIONS})
+                       choices={"demonstration": DEMONSTRATIONS, "keep": KEEP})
     p.add_argument("--natural-commonroad", nargs="+", default=(), metavar="DIR_OR_FILE",
                    help=HELP["natural_commonroad"])
     p.add_argument("--search-templates", nargs="+", default=(), metavar="TEMPLATE", choices=sorted(TEMPLATES),

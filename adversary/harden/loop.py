@@ -37,6 +37,7 @@ from riskmap.infra.rundir import claim_out_dir
 
 SETTINGS = "harden.json"
 ROUNDS = "rounds.json"
+KEEP = ("last", "best")          # HardenConfig.keep
 
 
 @dataclass(frozen=True)
@@ -71,6 +72,11 @@ class HardenConfig:
     search_templates: tuple[str, ...] = ()   # NSGA-II templates searched each round; (): CRASH only
     search_pop: int = 12             # evaluations per generation of a round's search
     search_gen: int = 6              # its generations (budget pop × gen per template)
+    # Which epoch of a round's fine-tune becomes its planner: "last", or "best" by open-loop ADE on
+    # the natural validation windows (the original's split). Fine-tuning on attack windows pulls
+    # the planner away from ordinary driving epoch by epoch; "best" stops where natural driving
+    # was still kept, the early stopping the no-regression bounds ask for.
+    keep: str = "last"
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "natural_commonroad", tuple(self.natural_commonroad))
@@ -87,6 +93,8 @@ class HardenConfig:
 
         if self.demonstration not in DEMONSTRATIONS:
             raise InputError(f"--demonstration {self.demonstration!r} must be one of {', '.join(DEMONSTRATIONS)}")
+        if self.keep not in KEEP:
+            raise InputError(f"--keep {self.keep!r} must be one of {', '.join(KEEP)}")
         if not 0 < self.lr < float("inf"):
             raise InputError(f"--lr must be a positive number, got {self.lr}")
         from adversary.search.scenarios import get_template
@@ -207,8 +215,8 @@ def earlier_shards(out: Path, r: int) -> list[Path]:
 
 
 def fine_tune(config: HardenConfig, r: int, shards: list[Path], progress: bool) -> dict:
-    """Round r's training: round r - 1's weights on the mixed data; the last epoch becomes the
-    round's planner, with the original checkpoint's planning settings."""
+    """Round r's training: round r - 1's weights on the mixed data; its last or best epoch
+    (`keep`) becomes the round's planner, with the original checkpoint's planning settings."""
     from adversary.harden.dataset import write_round_dataset
     from riskmap.infra.checkpoint import read_sidecar
     from riskmap.training.config import TrainConfig
@@ -231,10 +239,11 @@ def fine_tune(config: HardenConfig, r: int, shards: list[Path], progress: bool) 
         timing_head=bool(original["model"].get("timing_head", False)), **spacetime_settings(original))
     resume = (here / "train" / "state.pt").exists()
     train(settings, resume=resume, progress=progress)
-    last = here / "train" / "last"
-    side = round_sidecar(json.loads(last.with_suffix(".json").read_text()), original,
-                         {"round": r, "from": str(planner_path(config, r - 1)), "data": data})
-    shutil.copyfile(last.with_suffix(".safetensors"), here / "planner.safetensors.tmp")
+    kept = here / "train" / config.keep
+    side = round_sidecar(json.loads(kept.with_suffix(".json").read_text()), original,
+                         {"round": r, "from": str(planner_path(config, r - 1)), "data": data,
+                          "kept": config.keep})
+    shutil.copyfile(kept.with_suffix(".safetensors"), here / "planner.safetensors.tmp")
     (here / "planner.safetensors.tmp").replace(here / "planner.safetensors")
     write_json(here / "planner.json", side)
     return {"data": data, "train": side.get("metrics")}
@@ -346,6 +355,8 @@ def _settings(config: HardenConfig) -> dict:
     if not config.search_templates:        # runs from before the search option resume as they were
         for name in ("search_templates", "search_pop", "search_gen"):
             settings.pop(name)
+    if config.keep == "last":              # ... and those from before --keep
+        settings.pop("keep")
     return settings
 
 

@@ -284,3 +284,42 @@ def test_a_round_trains_on_the_windows_of_every_earlier_round_too(tmp_path):
     assert earlier_shards(tmp_path, 3) == [tmp_path / "round_1/windows/scene_00002",
                                            tmp_path / "round_1/windows/search_cut_in_ab",
                                            tmp_path / "round_2/windows/scene_00007"]
+
+
+@pytest.mark.parametrize("keep", ["last", "best"])
+def test_the_round_planner_is_the_epoch_keep_names(tmp_path, monkeypatch, keep):
+    """--keep best makes the fine-tune's best epoch (natural validation ADE) the round's planner,
+    --keep last its last one; the sidecar says which."""
+    from pathlib import Path
+
+    import adversary.harden.dataset as dataset
+    import riskmap.training.train as training
+    from adversary.harden.loop import fine_tune
+
+    root = Path(__file__).resolve().parents[3] / "checkpoints"
+    original = json.loads((root / "riskmap_highway.json").read_text())
+
+    def fake_train(settings, resume, progress):
+        out = Path(settings.out)
+        out.mkdir(parents=True)
+        for name, epoch in (("last", 1), ("best", 0)):
+            (out / f"{name}.safetensors").write_bytes(name.encode())
+            (out / f"{name}.json").write_text(json.dumps({**original, "epoch": epoch}))
+
+    monkeypatch.setattr(training, "train", fake_train)
+    monkeypatch.setattr(dataset, "write_round_dataset",
+                        lambda *args: {"validation_groups": ["g"], "windows": 2})
+    config = HardenConfig(str(root / "riskmap_highway"), "s", "n", str(tmp_path), keep=keep)
+    fine_tune(config, 1, [], progress=False)
+    side = json.loads((tmp_path / "round_1" / "planner.json").read_text())
+    assert (tmp_path / "round_1" / "planner.safetensors").read_bytes() == keep.encode()
+    assert side["epoch"] == (0 if keep == "best" else 1) and side["hardening"]["kept"] == keep
+
+
+def test_keep_is_checked_and_older_runs_resume_without_it():
+    from adversary.harden.loop import _settings
+
+    with pytest.raises(InputError, match="--keep 'first'"):
+        HardenConfig("c", "s", "n", "o", keep="first")
+    assert "keep" not in _settings(HardenConfig("c", "s", "n", "o"))
+    assert _settings(HardenConfig("c", "s", "n", "o", keep="best"))["keep"] == "best"
