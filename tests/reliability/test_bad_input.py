@@ -1251,6 +1251,7 @@ add(
     harden_row("scenes-missing", S(missing("noscenes")), scenes=missing("noscenes")),
     harden_row("count-too-many", S("--count"), extra=("--count", "5")),
     harden_row("rounds-zero", S("--rounds"), extra=("--rounds", "0"), usage=True),
+    harden_row("keep-unknown", S("--keep"), extra=("--keep", "first"), usage=True),
     harden_row("out-under-file", UNDER_FILE_NAMES, out_arg=under_file, out=under_file),
 )
 
