@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +30,9 @@ from rasterize.frames import ego_from_grid, ego_from_world, ego_pose
 from riskmap.data.dataset import DemoDataset
 from riskmap.infra.atomic import write_json
 from riskmap.planner.riskmap_planner import RiskMapPlanner
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # ablation_output, however the script is started
+from ablation_output import pyplot, write_table  # noqa: E402
 
 VARIANCES = (2.0, 5.0)               # cells²
 CLASSES = (("straight", 0.0, 10.0), ("slow turn", 10.0, 45.0), ("large turn", 45.0, 360.0))
@@ -56,14 +60,10 @@ def plan_errors(planner: RiskMapPlanner, scene) -> tuple[dict, object]:
 
 
 def example_png(scene, planner: RiskMapPlanner, plans: dict, path: Path, title: str) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     from rasterize.raster import rasterize_scene
     from riskmap.figures.panels import raster_to_rgb
 
+    plt = pyplot()
     ext = planner.raster.extent
     origin, heading = ego_pose(scene)
     demo = np.concatenate([[[0.0, 0.0]], ego_from_world(scene.ego_future_xy(), origin, heading)])
@@ -132,8 +132,7 @@ def main() -> None:
         for variance, r in by_variance.items():
             lines.append(f"| {cls} | {r['windows']} | {variance} | {r['ade_m']:.2f} | {r['fde_m']:.2f} | "
                          f"{r['goal_error_m']:.2f} |")
-    (args.out / "table.md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    write_table(args.out, lines)
     for cls, (gap, data, index, checkpoint) in examples.items():
         planners = {v: RiskMapPlanner.load(checkpoint, goal_variance=v) for v in VARIANCES}
         scene = DemoDataset(data, planners[2.0].grid.rows, raster=planners[2.0].raster).scene(index)

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +26,9 @@ from riskmap.data.dataset import DemoDataset
 from riskmap.evaluation.open_loop import window_errors
 from riskmap.infra.atomic import write_json
 from riskmap.planner.riskmap_planner import RiskMapPlanner
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # ablation_output, however the script is started
+from ablation_output import print_row, pyplot, save_figure, write_table  # noqa: E402
 
 RUNS = {25: "runs/highway_r25", 50: "runs/highway_v1", 75: "runs/highway_r75", 100: "runs/highway_r100"}
 
@@ -50,21 +54,15 @@ def main() -> None:
         rows.append({"resolution": g, "horizon": planner.horizon, "windows": len(picks),
                      "ade_m": float(np.mean(e["ade_m"])), "goal_error_m": float(np.mean(e["goal_error_m"])),
                      "vi_ms": float(np.median(e["vi_ms"])), "total_ms": float(np.median(e["plan_ms"]))})
-        print(" ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in rows[-1].items()),
-              flush=True)
+        print_row(rows[-1])
     write_json(args.out / "results.json", {"rows": rows, "runs": RUNS, "threads": args.threads})
     lines = ["| resolution | horizon | windows | ADE (m) | goal error (m) | VI ms | plan ms |",
              "|---|---|---|---|---|---|---|"]
     lines += [f"| {r['resolution']} | {r['horizon']} | {r['windows']} | {r['ade_m']:.2f} | "
               f"{r['goal_error_m']:.2f} | {r['vi_ms']:.1f} | {r['total_ms']:.1f} |" for r in rows]
-    (args.out / "table.md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    write_table(args.out, lines)
 
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(8.5, 3.3), dpi=110)
     g = [r["resolution"] for r in rows]
     axes[0].plot(g, [r["vi_ms"] for r in rows], "-o", label="value iteration")
@@ -79,11 +77,7 @@ def main() -> None:
         ax.set_xlabel("grid resolution (cells a side)")
         ax.set_xticks(g)
         ax.grid(alpha=0.3)
-    fig.suptitle("resolution ablation, highway (same data, seed and training per resolution)", fontsize=10)
-    fig.tight_layout()
-    args.out.mkdir(parents=True, exist_ok=True)
-    fig.savefig(args.out / "ablation.png")
-    plt.close(fig)
+    save_figure(fig, args.out, "resolution ablation, highway (same data, seed and training per resolution)")
 
 
 if __name__ == "__main__":

@@ -18,6 +18,7 @@ centre to centre). Writes experiments/results/ablation_uncertainty_shape/.
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +28,9 @@ from rasterize.maps import uncertainty_map
 from riskmap.data.dataset import DemoDataset
 from riskmap.infra.atomic import write_json
 from riskmap.planner.riskmap_planner import RiskMapPlanner
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # ablation_output, however the script is started
+from ablation_output import print_row, write_table  # noqa: E402
 
 SHAPES = {"0.5/0.5": "runs/highway_v10_s05_05", "0.5/1.5": "runs/highway_v10",
           "2/2": "runs/highway_v10_s2_2"}
@@ -76,16 +80,14 @@ def main() -> None:
                      "svf_overlap_common_N": float(np.mean(overlap)),
                      "plan_clearance_m": float(np.mean(clearance)),
                      "plan_clearance_p10_m": float(np.percentile(clearance, 10))})
-        print(" ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in rows[-1].items()),
-              flush=True)
+        print_row(rows[-1])
     write_json(args.out / "results.json", {"rows": rows, "runs": SHAPES})
     lines = ["| σx / σy (m) | windows | ADE (m) | SVF overlap with N(0.5/1.5) | "
              "plan clearance mean (m) | p10 (m) |",
              "|---|---|---|---|---|---|"]
     lines += [f"| {r['sigma_x_y']} | {r['windows']} | {r['ade_m']:.2f} | {r['svf_overlap_common_N']:.4f} | "
               f"{r['plan_clearance_m']:.1f} | {r['plan_clearance_p10_m']:.1f} |" for r in rows]
-    (args.out / "table.md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    write_table(args.out, lines)
 
 
 if __name__ == "__main__":

@@ -16,6 +16,7 @@ Writes experiments/results/ablation_uncertainty_weight/{results.json,table.md,ab
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +25,9 @@ from riskmap.evaluation.drive import drive
 from riskmap.evaluation.open_loop import evaluate
 from riskmap.infra.atomic import write_json
 from riskmap.sim.rollout import DriveConfig
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # ablation_output, however the script is started
+from ablation_output import print_row, pyplot, save_figure, write_table  # noqa: E402
 
 
 def main() -> None:
@@ -47,8 +51,7 @@ def main() -> None:
                      "ade_m": open_loop["ade_m"]["mean"], "episodes": summary["episodes"],
                      "min_gap_m": summary["min_gap_m"], "distance_m": summary["distance_m"],
                      "collision_rate": summary["collision_rate"]})
-        print(" ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in rows[-1].items()),
-              flush=True)
+        print_row(rows[-1])
     write_json(args.out / "results.json", {"rows": rows, "heldout": str(args.heldout),
                                            "windows": args.windows})
     lines = ["| v | SVF overlap with N | ADE (m) | episodes | mean min gap (m) | distance (m) | collisions |",
@@ -57,14 +60,9 @@ def main() -> None:
         lines.append(f"| {r['v']:g} | {r['svf_overlap']:.4f} | {r['ade_m']:.2f} | {r['episodes']} | "
                      f"{r['min_gap_m']:.1f} | {r['distance_m']:.0f} | "
                      f"{round(r['collision_rate'] * r['episodes'])} / {r['episodes']} |")
-    (args.out / "table.md").write_text("\n".join(lines) + "\n")
-    print("\n".join(lines))
+    write_table(args.out, lines)
 
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
+    plt = pyplot()
     v = np.array([r["v"] for r in rows])
     fig, axes = plt.subplots(1, 3, figsize=(10.5, 3.2), dpi=110)
     for ax, key, label in zip(axes, ("svf_overlap", "min_gap_m", "distance_m"),
@@ -75,11 +73,7 @@ def main() -> None:
         ax.set_xlabel("uncertainty weight v")
         ax.set_title(label, fontsize=9)
         ax.grid(alpha=0.3)
-    fig.suptitle("uncertainty weight ablation, highway (same data and seed per level)", fontsize=10)
-    fig.tight_layout()
-    args.out.mkdir(parents=True, exist_ok=True)
-    fig.savefig(args.out / "ablation.png")
-    plt.close(fig)
+    save_figure(fig, args.out, "uncertainty weight ablation, highway (same data and seed per level)")
 
 
 if __name__ == "__main__":

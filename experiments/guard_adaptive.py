@@ -35,12 +35,13 @@ sys.path.insert(0, str(ROOT / "experiments"))
 
 from crash_tables import PLANNER_K, PLANNERS, Run, run_dir  # noqa: E402
 from guard_adversarial import drive_record  # noqa: E402
+from guard_eval import intervention_totals, print_table, ratio_cell  # noqa: E402
 
 from adversary.crash.attack import AttackConfig  # noqa: E402
 from adversary.crash.guard_data import read_attack_run  # noqa: E402
 from adversary.crash.run import run_attacks  # noqa: E402
 from adversary.crash.scenes import load_record  # noqa: E402
-from riskmap.infra.atomic import atomic_write, write_json  # noqa: E402
+from riskmap.infra.atomic import write_json  # noqa: E402
 from riskmap.infra.stats import wilson  # noqa: E402
 
 OUT = ROOT / "out" / "guard_adaptive"
@@ -90,16 +91,13 @@ def summarise(count: int | None = None) -> list[dict]:
                 records = [json.loads((cell / f"{n}.json").read_text()) for n in names]
                 if not records:
                     continue
-                frames = sum(r["guard"]["frames"] for r in records if "guard" in r)
-                interventions = sum(r["guard"]["interventions"] for r in records if "guard" in r)
                 rows.append({"family": family_dir.name, "inner": inner, "variant": variant,
                              "scenes": len(records),
                              "collision": wilson(sum(r["collision"] for r in records), len(records)),
                              "collision_any": sum(r["collision_any"] for r in records),
                              "progress_m": float(np.mean([r["progress_m"] for r in records])),
-                             "frames": frames, "interventions": interventions,
-                             "hard": sum(r["guard"].get("hard", 0) for r in records if "guard" in r),
-                             "intervention_ratio": interventions / frames if frames else None})
+                             **intervention_totals(records),
+                             "hard": sum(r["guard"].get("hard", 0) for r in records if "guard" in r)})
     return rows
 
 
@@ -108,10 +106,9 @@ def markdown(rows: list[dict]) -> str:
              "progress (m, 6 s) | interventions / frames | BDI ratio |", "|" + "---|" * 9]
     for r in rows:
         c = r["collision"]
-        ratio = f"{r['intervention_ratio']:.3f}" if r["intervention_ratio"] is not None else "–"
         lines.append(f"| {r['family']} | {r['inner']} | {r['variant']} | {r['scenes']} | {c['k']} "
                      f"({100 * c['value']:.0f}% [{100 * c['lo']:.0f}–{100 * c['hi']:.0f}]) | {r['collision_any']} | "
-                     f"{r['progress_m']:.1f} | {r['interventions']} / {r['frames'] or '–'} | {ratio} |")
+                     f"{r['progress_m']:.1f} | {r['interventions']} / {r['frames'] or '–'} | {ratio_cell(r)} |")
     return "\n".join(lines) + "\n"
 
 
@@ -132,11 +129,7 @@ def main() -> None:
         for variant in args.variants.split(","):
             attack(args.family, args.inner, variant, args.count)
             drive(args.family, args.inner, variant, args.count)
-    rows = summarise()
-    if args.table is not None:
-        write_json(args.table.with_suffix(".json"), rows)
-        atomic_write(args.table.with_suffix(".md"), lambda f: f.write(markdown(rows).encode()))
-    print(markdown(rows))
+    print_table(summarise(), markdown, args.table)
 
 
 if __name__ == "__main__":

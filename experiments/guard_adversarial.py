@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +33,9 @@ from adversary.crash.judge import judge, rollout
 from adversary.crash.scenes import load_record
 from riskmap.infra.atomic import write_json
 from riskmap.registry import cached_planner
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))   # guard_eval, however the script is started
+from guard_eval import intervention_totals, print_table, ratio_cell  # noqa: E402
 
 VARIANT_PREFIX = {"alone": "", "always": "guard-always:", "tgat": "guard:", "tgat-anyspeed": "guard:"}
 
@@ -156,16 +160,13 @@ def summarise(out: Path) -> list[dict]:
         records = [json.loads((cell / f"{name}.json").read_text()) for name in sorted(common[cell.parent])]
         if not records:
             continue
-        frames = sum(r["guard"]["frames"] for r in records if "guard" in r)
-        interventions = sum(r["guard"]["interventions"] for r in records if "guard" in r)
         rows.append({
             "env": env_id, "attack_run": run_name, "variant": variant, "scenes": len(records),
             "collisions": sum(r["collision"] for r in records),
             "collision_rate": float(np.mean([r["collision"] for r in records])),
             "collisions_any": sum(r["collision_any"] for r in records),
             "progress_m": float(np.mean([r["progress_m"] for r in records])),
-            "frames": frames, "interventions": interventions,
-            "intervention_ratio": interventions / frames if frames else None,
+            **intervention_totals(records),
         })
     return rows
 
@@ -174,10 +175,9 @@ def markdown(rows: list[dict]) -> str:
     lines = [("| env | attack run | variant | scenes | collisions with adversary | rate | any collision | "
               "progress (m, 6 s) | frames | interventions | BDI ratio |"), "|" + "---|" * 11]
     for r in rows:
-        ratio = f"{r['intervention_ratio']:.3f}" if r["intervention_ratio"] is not None else "–"
         lines.append(f"| {r['env']} | {r['attack_run']} | {r['variant']} | {r['scenes']} | {r['collisions']} | "
                      f"{r['collision_rate']:.2f} | {r['collisions_any']} | {r['progress_m']:.1f} | "
-                     f"{r['frames'] or '–'} | {r['interventions'] or 0} | {ratio} |")
+                     f"{r['frames'] or '–'} | {r['interventions'] or 0} | {ratio_cell(r)} |")
     return "\n".join(lines) + "\n"
 
 
@@ -194,11 +194,7 @@ def main() -> None:
 
     torch.set_num_threads(1)
     run(args.attacks, args.out, args.variants.split(","), args.count)
-    rows = summarise(args.out)
-    if args.table is not None:
-        write_json(args.table.with_suffix(".json"), rows)
-        args.table.with_suffix(".md").write_text(markdown(rows))
-    print(markdown(rows))
+    print_table(summarise(args.out), markdown, args.table)
 
 
 if __name__ == "__main__":

@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from riskmap.guard.aggressors import AggressorHook
-from riskmap.infra.atomic import write_json
+from riskmap.infra.atomic import atomic_write, write_json
 from riskmap.infra.stats import wilson
 from riskmap.registry import make_planner
 from riskmap.sim.failures import classify_run, summarise_failures
@@ -82,6 +82,29 @@ def run_cell(out: Path, env_id: str, scene: str, inner: str, variant: str, episo
         print(f"{env_id} {scene} {inner} {variant} episode {episode}: collided {record['collided']}", flush=True)
 
 
+def intervention_totals(records: list[dict]) -> dict:
+    """Decision frames and System 2 take-overs summed over the records driven with a guard, and the
+    BDI intervention ratio (None where no decision frame was recorded: no guard, or it never ran)."""
+    frames = sum(r["guard"]["frames"] for r in records if "guard" in r)
+    interventions = sum(r["guard"]["interventions"] for r in records if "guard" in r)
+    return {"frames": frames, "interventions": interventions,
+            "intervention_ratio": interventions / frames if frames else None}
+
+
+def ratio_cell(row: dict) -> str:
+    """A row's BDI intervention ratio as a table cell ("–" where it has none)."""
+    return f"{row['intervention_ratio']:.3f}" if row["intervention_ratio"] is not None else "–"
+
+
+def print_table(rows: list[dict], markdown, prefix: Path | None) -> None:
+    """Print the markdown table of `rows`; with --table PREFIX, also write PREFIX.json (the rows)
+    and PREFIX.md (the table)."""
+    if prefix is not None:
+        write_json(prefix.with_suffix(".json"), rows)
+        atomic_write(prefix.with_suffix(".md"), lambda f: f.write(markdown(rows).encode()))
+    print(markdown(rows))
+
+
 def summarise(out: Path) -> list[dict]:
     rows = []
     for cell in sorted(p for p in out.glob("*/*/*/*") if p.is_dir()):
@@ -89,8 +112,6 @@ def summarise(out: Path) -> list[dict]:
         if not records:
             continue
         env_id, scene, inner, variant = cell.relative_to(out).parts
-        frames = sum(r["guard"]["frames"] for r in records if "guard" in r)
-        interventions = sum(r["guard"]["interventions"] for r in records if "guard" in r)
         s1 = [x for r in records if "guard" in r for x in r["guard"]["system1_ms"]]
         s2 = [x for r in records if "guard" in r for x in r["guard"]["system2_ms"]]
         hard = sum(r["guard"].get("hard", 0) for r in records if "guard" in r)
@@ -103,8 +124,7 @@ def summarise(out: Path) -> list[dict]:
             "failures": summarise_failures([r.get("failure") for r in records if r["collided"]], len(records)),
             "distance_m": float(np.mean([r["distance_m"] for r in records])),
             "mean_speed_mps": float(np.mean([r["mean_speed_mps"] for r in records])),
-            "frames": frames, "interventions": interventions,
-            "intervention_ratio": interventions / frames if frames else None,
+            **intervention_totals(records),
             "system1_ms_median": float(np.median(s1)) if s1 else None,
             "system2_ms_median": float(np.median(s2)) if s2 else None,
         })
@@ -116,7 +136,6 @@ def markdown(rows: list[dict]) -> str:
               "avoidable / at fault / struck from behind / side / valid attack / unknown | distance (m) | "
              "mean speed (m/s) | frames | interventions (hard) | BDI ratio |"), "|" + "---|" * 13]
     for r in rows:
-        ratio = f"{r['intervention_ratio']:.3f}" if r["intervention_ratio"] is not None else "–"
         ci = r["collision_ci"]
         f = r.get("failures") or summarise_failures([None] * r["collisions"], r["episodes"])
         fc = f["counted_ci95"]
@@ -127,7 +146,7 @@ def markdown(rows: list[dict]) -> str:
                      f"{f['counted']} ({100 * f['counted_rate']:.0f}% [{100 * fc[0]:.0f}–{100 * fc[1]:.0f}]) | "
                      f"{classes} | "
                      f"{r['distance_m']:.0f} | {r['mean_speed_mps']:.1f} | {r['frames'] or '–'} | "
-                     f"{r['interventions'] or 0} ({r['hard']}) | {ratio} |")
+                     f"{r['interventions'] or 0} ({r['hard']}) | {ratio_cell(r)} |")
     return "\n".join(lines) + "\n"
 
 
@@ -148,11 +167,7 @@ def main() -> None:
                 for inner in args.inner.split(","):
                     for variant in args.variants.split(","):
                         run_cell(args.out, env_id, scene, inner, variant, args.episodes, args.seed)
-    rows = summarise(args.out)
-    if args.table is not None:
-        write_json(args.table.with_suffix(".json"), rows)
-        args.table.with_suffix(".md").write_text(markdown(rows))
-    print(markdown(rows))
+    print_table(summarise(args.out), markdown, args.table)
 
 
 if __name__ == "__main__":

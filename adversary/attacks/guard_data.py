@@ -24,18 +24,21 @@ def _run_guard_data(args: argparse.Namespace) -> int:
     if args.attacks:
         summary = export([Path(d) for d in args.attacks], Path(args.out), config, resume=args.resume,
                          progress=not args.quiet)
-        for split, c in summary["splits"].items():
-            print(f"{split}: {c['windows']} windows ({c['positives']} positive) from {c['episodes']} attack "
-                  f"records ({c['crashes']} crashes)")
+        _print_split_counts(summary["splits"], "attack records")
         print(f"{summary['partner_is_adversary']}/{sum(c['crashes'] for c in summary['splits'].values())} "
               f"crashes: positives name the adversary; skipped {summary['skipped']}")
     if args.search:
         metas = export_search([Path(d) for d in args.search], Path(args.out), config.split, config.val_fraction,
                               config.windows, resume=args.resume, progress=not args.quiet)
-        for split, c in split_counts(metas).items():
-            print(f"{split}: {c['windows']} windows ({c['positives']} positive) from {c['episodes']} searched "
-                  f"scenarios ({c['crashes']} crashes)")
+        _print_split_counts(split_counts(metas), "searched scenarios")
     return 0
+
+
+def _print_split_counts(splits: dict, episodes_are: str) -> None:
+    """One line per split of what it now holds; `episodes_are` names what an episode was made from."""
+    for split, c in splits.items():
+        print(f"{split}: {c['windows']} windows ({c['positives']} positive) from {c['episodes']} "
+              f"{episodes_are} ({c['crashes']} crashes)")
 
 
 def add_parsers(subparsers) -> None:

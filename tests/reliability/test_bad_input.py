@@ -131,13 +131,21 @@ def _copy_dataset(source: Path, target: Path) -> Path:
     return target
 
 
-def _edit_shard(dataset: Path, edit) -> Path:
-    shard = min((dataset / "shards").glob("*.npz"))
-    with np.load(shard) as data:
+# The ways any input file is broken (`Fixtures.spoil`).
+SPOILS = ("half", "empty", "png", "passwd")
+
+
+def _edit_npz(path: Path, edit) -> None:
+    """Rewrite the .npz at `path` after `edit(arrays)` has changed its arrays (a dict) in place."""
+    with np.load(path) as data:
         arrays = {k: data[k] for k in data.files}
     edit(arrays)
-    with open(shard, "wb") as f:
+    with open(path, "wb") as f:
         np.savez_compressed(f, **arrays)
+
+
+def _edit_shard(dataset: Path, edit) -> Path:
+    _edit_npz(min((dataset / "shards").glob("*.npz")), edit)
     return dataset
 
 
@@ -153,6 +161,12 @@ def _poison_lane(arrays):
     arrays["lane_centre"][0, 0] = np.nan
 
 
+def _poison_first_track(arrays):
+    """NaN in the first value of a scene's first float array of rank 3 or more (its tracks)."""
+    key = next(k for k in arrays if arrays[k].dtype.kind == "f" and arrays[k].ndim >= 3)
+    arrays[key].reshape(-1)[0] = np.nan
+
+
 class Fixtures:
     """Every input a row needs, made on first use under `root`."""
 
@@ -163,6 +177,29 @@ class Fixtures:
         path = self.root / name
         path.mkdir(parents=True, exist_ok=True)
         return path
+
+    def spoil(self, path: Path, how: str) -> None:
+        """Break the file at `path` one of the SPOILS ways every reader must survive: cut in half,
+        emptied, or replaced by a PNG or by /etc/passwd (readable text, not the format)."""
+        if how == "half":
+            _truncate(path)
+        elif how == "empty":
+            path.write_bytes(b"")
+        elif how == "png":
+            path.write_bytes(self.png.read_bytes())
+        elif how == "passwd":
+            path.write_bytes(PASSWD.read_bytes())
+        else:
+            raise KeyError(how)
+
+    def spoil_part(self, variant: str, **parts: Path) -> bool:
+        """For a variant named HOW_PART (half_manifest, png_shard, passwd_sidecar, ...): spoil the
+        file `parts[PART]` the HOW way and say True; False for any other variant."""
+        how, _, part = variant.partition("_")
+        if how not in SPOILS or part not in parts:
+            return False
+        self.spoil(parts[part], how)
+        return True
 
     # -- plain files ---------------------------------------------------------------------------
     @cached_property
@@ -200,24 +237,14 @@ class Fixtures:
             return target
         data = _copy_dataset(self.dataset, target)
         manifest = data / "manifest.json"
-        if name == "half_manifest":
-            _truncate(manifest)
-        elif name == "empty_manifest":
-            manifest.write_bytes(b"")
-        elif name == "passwd_manifest":
-            manifest.write_bytes(PASSWD.read_bytes())
-        elif name == "old_version":
+        if self.spoil_part(name, manifest=manifest, shard=min((data / "shards").glob("*.npz"))):
+            return data
+        if name == "old_version":
             content = json.loads(manifest.read_text())
             content["config"]["format_version"] = 1
             manifest.write_text(json.dumps(content))
         elif name == "no_index":
             (data / "index.json").unlink()
-        elif name == "half_shard":
-            _truncate(min((data / "shards").glob("*.npz")))
-        elif name == "empty_shard":
-            min((data / "shards").glob("*.npz")).write_bytes(b"")
-        elif name == "png_shard":
-            min((data / "shards").glob("*.npz")).write_bytes(self.png.read_bytes())
         elif name == "nan_scene":
             _edit_shard(data, _poison_state(np.nan))
         elif name == "inf_scene":
@@ -235,12 +262,9 @@ class Fixtures:
             return path
         path.parent.mkdir(parents=True, exist_ok=True)
         text = GOOD_XML.read_text()
-        if name == "half":
-            path.write_text(text[: len(text) // 2])
-        elif name == "empty":
-            path.write_text("")
-        elif name == "png":
-            path.write_bytes(self.png.read_bytes())
+        if name in SPOILS:
+            path.write_text(text)
+            self.spoil(path, name)
         elif name == "nan_map":
             # every lanelet bound's first x is NaN: the map itself is broken
             path.write_text(re.sub(r"(<leftBound>\s*<point>\s*<x>)[^<]*(</x>)", r"\1nan\2", text))
@@ -256,21 +280,9 @@ class Fixtures:
             return target
         _copy_checkpoint(CHECKPOINTS / source, target)
         weights, sidecar = target.with_suffix(".safetensors"), target.with_suffix(".json")
-        if variant == "good":
-            pass
-        elif variant == "half_weights":
-            _truncate(weights)
-        elif variant == "empty_weights":
-            weights.write_bytes(b"")
-        elif variant == "png_weights":
-            weights.write_bytes(self.png.read_bytes())
-        elif variant == "half_sidecar":
-            _truncate(sidecar)
-        elif variant == "empty_sidecar":
-            sidecar.write_bytes(b"")
-        elif variant == "passwd_sidecar":
-            sidecar.write_bytes(PASSWD.read_bytes())
-        elif variant == "no_kind":
+        if variant == "good" or self.spoil_part(variant, weights=weights, sidecar=sidecar):
+            return target
+        if variant == "no_kind":
             content = json.loads(sidecar.read_text())
             del content["kind"]
             sidecar.write_text(json.dumps(content))
@@ -319,28 +331,17 @@ class Fixtures:
                       "frame": (np.arange(n) // 2).astype(np.int32), "frames": np.array([n // 2], np.int32)}
             np.savez_compressed(jobs / f"{split}_highway-v0_idm_s0_e0000_nat.npz", **arrays)
         first = jobs / "train_highway-v0_idm_s0_e0000_nat.npz"
-
-        def edit(change):
-            with np.load(first) as data:
-                arrays = {k: data[k] for k in data.files}
-            change(arrays)
-            np.savez_compressed(first, **arrays)
-
+        if self.spoil_part(variant, job=first):
+            return root
         if variant == "old_format":          # an older version's file: a fixed label, no time to contact
-            edit(lambda a: a.update(label=(a.pop("ttc_s") < 1).astype(np.int8), edge=a["edge"][..., :1]))
+            _edit_npz(first, lambda a: a.update(label=(a.pop("ttc_s") < 1).astype(np.int8),
+                                                edge=a["edge"][..., :1]))
         elif variant == "narrow_edges":      # d_s only: an edge dimension this version does not read
-            edit(lambda a: a.update(edge=np.ascontiguousarray(a["edge"][..., :1])))
+            _edit_npz(first, lambda a: a.update(edge=np.ascontiguousarray(a["edge"][..., :1])))
         elif variant == "nan_frame":
-            edit(lambda a: a["frame_edge"].__setitem__((0, 0, 0), np.nan))
-        elif variant == "half_job":
-            _truncate(first)
-        elif variant == "empty_job":
-            first.write_bytes(b"")
+            _edit_npz(first, lambda a: a["frame_edge"].__setitem__((0, 0, 0), np.nan))
         elif variant == "nan_job":
-            with np.load(first) as data:
-                arrays = {k: data[k] for k in data.files}
-            arrays["edge"][0, 0, 0] = np.nan
-            np.savez_compressed(first, **arrays)
+            _edit_npz(first, lambda a: a["edge"].__setitem__((0, 0, 0), np.nan))
         elif variant == "wrong_keys":
             np.savez_compressed(first, something=np.zeros(3))
         elif variant != "good":
@@ -358,11 +359,12 @@ class Fixtures:
             return path
         path.parent.mkdir(parents=True, exist_ok=True)
         good = self.GOOD_CAMPAIGN
+        if variant in SPOILS:
+            path.write_text(good)
+            self.spoil(path, variant)
+            return path
         texts = {
             "good": good,
-            "empty": "",
-            "half": good[: len(good) // 2],
-            "passwd": PASSWD.read_text(),
             "unknown_key": good + "colour: blue\n",
             "unknown_attack_key": good.replace("{name: natural}", "{name: natural, speed: 3}"),
             "unknown_param": good.replace("{name: natural}",
@@ -385,10 +387,7 @@ class Fixtures:
             "crash_model_missing": good.replace(
                 "{name: natural}", "{name: crash, params: {traffic_model: /nonexistent/traffic}}"),
         }
-        if variant == "png":
-            path.write_bytes(self.png.read_bytes())
-        else:
-            path.write_text(texts[variant])
+        path.write_text(texts[variant])
         return path
 
     @cached_property
@@ -406,13 +405,8 @@ class Fixtures:
         if target.exists():
             return target
         shutil.copytree(self.campaign_dir, target, ignore=shutil.ignore_patterns(".lock"))
-        if variant == "half_meta":
-            _truncate(target / "campaign.json")
-        elif variant == "passwd_meta":
-            (target / "campaign.json").write_bytes(PASSWD.read_bytes())
-        elif variant == "half_record":
-            _truncate(min((target / "records").rglob("*.json")))
-        elif variant != "good":
+        if variant != "good" and not self.spoil_part(variant, meta=target / "campaign.json",
+                                                     record=min((target / "records").rglob("*.json"))):
             raise KeyError(variant)
         return target
 
@@ -448,19 +442,11 @@ class Fixtures:
             return target
         shutil.copytree(self.scenes, target)
         scene = min(target.glob("scene_*.npz"))
-        if variant == "half_index":
-            _truncate(target / "index.json")
-        elif variant == "half_scene":
-            _truncate(scene)
-        elif variant == "png_scene":
-            scene.write_bytes(self.png.read_bytes())
-        elif variant == "nan_scene":
-            with np.load(scene) as data:
-                arrays = {k: data[k] for k in data.files}
-            key = next(k for k in arrays if arrays[k].dtype.kind == "f" and arrays[k].ndim >= 3)
-            arrays[key].reshape(-1)[0] = np.nan
-            np.savez_compressed(scene, **arrays)
-        elif variant != "good":
+        if variant == "good" or self.spoil_part(variant, index=target / "index.json", scene=scene):
+            return target
+        if variant == "nan_scene":
+            _edit_npz(scene, _poison_first_track)
+        else:
             raise KeyError(variant)
         return target
 
@@ -476,17 +462,16 @@ class Fixtures:
              "config": {"selector": "distance"}}))
         (root / "attacks" / "scene_00000.json").write_text(json.dumps(
             {"name": "scene_00000", "status": "no_candidate", "collision": False}))
-        if variant == "half_run":
-            _truncate(root / "run.json")
-        elif variant == "half_record":
-            _truncate(root / "attacks" / "scene_00000.json")
-        elif variant == "no_records":
+        if variant == "good" or self.spoil_part(variant, run=root / "run.json",
+                                                record=root / "attacks" / "scene_00000.json"):
+            return root
+        if variant == "no_records":
             (root / "attacks" / "scene_00000.json").unlink()
         elif variant == "ok_record_no_scene":
             (root / "attacks" / "scene_00000.json").write_text(json.dumps(
                 {"name": "scene_00000", "status": "ok", "collision": False,
                  "scene": {"env_id": "highway-v0", "scene_seed": 0, "episode": 0}}))
-        elif variant != "good":
+        else:
             raise KeyError(variant)
         return root
 

@@ -69,11 +69,6 @@ def scenes_reference(tmp_path_factory):
     return Reference(_scenes, tmp_path_factory.mktemp("scenes"))
 
 
-@pytest.mark.parametrize("point", kill_point_params())
-def test_scenes(scenes_reference, point, tmp_path):
-    scenes_reference.check_kill_and_resume(point, tmp_path / "out")
-
-
 # ---------------------------------------------------------------- adversary attack
 
 # table.md carries the seconds per scene (a clock); summary.json holds the same numbers by key.
@@ -91,27 +86,17 @@ def _attack(scenes: Path, selector: str, planner: str, iterations: int):
 
 
 @pytest.fixture(scope="module")
-def distance_attack_reference(scenes_reference, tmp_path_factory):
+def attack_distance_reference(scenes_reference, tmp_path_factory):
     # 80 iterations: the car ahead in the next lane of scene 1 cuts in (a collision for guard-data)
     return Reference(_attack(scenes_reference.out, "distance", "replay", 80),
                       tmp_path_factory.mktemp("attack_distance"), ATTACK_IGNORE)
 
 
 @pytest.fixture(scope="module")
-def crash_attack_reference(scenes_reference, tmp_path_factory):
+def attack_crash_reference(scenes_reference, tmp_path_factory):
     # CRASH with the shipped selectors against a closed-loop ego (tests/adversary/crash)
     return Reference(_attack(scenes_reference.out, "crash", "idm", 20),
                       tmp_path_factory.mktemp("attack_crash"), ATTACK_IGNORE)
-
-
-@pytest.mark.parametrize("point", kill_point_params())
-def test_attack_distance(distance_attack_reference, point, tmp_path):
-    distance_attack_reference.check_kill_and_resume(point, tmp_path / "out")
-
-
-@pytest.mark.parametrize("point", kill_point_params())
-def test_attack_crash(crash_attack_reference, point, tmp_path):
-    crash_attack_reference.check_kill_and_resume(point, tmp_path / "out")
 
 
 # ---------------------------------------------------------------- adversary guard-data
@@ -124,14 +109,9 @@ def _guard_data(attacks: list[Path]):
 
 
 @pytest.fixture(scope="module")
-def guard_data_reference(distance_attack_reference, crash_attack_reference, tmp_path_factory):
-    return Reference(_guard_data([distance_attack_reference.out, crash_attack_reference.out]),
+def guard_data_reference(attack_distance_reference, attack_crash_reference, tmp_path_factory):
+    return Reference(_guard_data([attack_distance_reference.out, attack_crash_reference.out]),
                       tmp_path_factory.mktemp("guard_data"))
-
-
-@pytest.mark.parametrize("point", kill_point_params())
-def test_guard_data(guard_data_reference, point, tmp_path):
-    guard_data_reference.check_kill_and_resume(point, tmp_path / "out")
 
 
 # ---------------------------------------------------------------- adversary search
@@ -146,23 +126,13 @@ def _search(algorithm: str, seed: int):
 
 
 @pytest.fixture(scope="module")
-def nsga2_reference(tmp_path_factory):
+def search_nsga2_reference(tmp_path_factory):
     return Reference(_search("nsga2", 1), tmp_path_factory.mktemp("search_nsga2"))
 
 
 @pytest.fixture(scope="module")
-def random_reference(tmp_path_factory):
+def search_random_reference(tmp_path_factory):
     return Reference(_search("random", 0), tmp_path_factory.mktemp("search_random"))
-
-
-@pytest.mark.parametrize("point", kill_point_params())
-def test_search_nsga2(nsga2_reference, point, tmp_path):
-    nsga2_reference.check_kill_and_resume(point, tmp_path / "out")
-
-
-@pytest.mark.parametrize("point", kill_point_params())
-def test_search_random(random_reference, point, tmp_path):
-    random_reference.check_kill_and_resume(point, tmp_path / "out")
 
 
 # ---------------------------------------------------------------- adversary train-traffic
@@ -178,11 +148,6 @@ def _train_traffic(data: Path):
 @pytest.fixture(scope="module")
 def train_traffic_reference(collected, tmp_path_factory):
     return Reference(_train_traffic(collected), tmp_path_factory.mktemp("train_traffic"))
-
-
-@pytest.mark.parametrize("point", kill_point_params())
-def test_train_traffic(train_traffic_reference, point, tmp_path):
-    train_traffic_reference.check_kill_and_resume(point, tmp_path / "out")
 
 
 @pytest.mark.parametrize("stage", ["mid", pytest.param("after", marks=pytest.mark.faults)])
@@ -209,9 +174,18 @@ def train_selector_reference(collected, tmp_path_factory):
     return Reference(_train_selector(collected), tmp_path_factory.mktemp("train_selector"))
 
 
+# ---------------------------------------------------------------- every command above
+
+# By the name of its `<command>_reference` fixture.
+COMMANDS = ("scenes", "attack_distance", "attack_crash", "guard_data", "search_nsga2", "search_random",
+            "train_traffic", "train_selector")
+
+
 @pytest.mark.parametrize("point", kill_point_params())
-def test_train_selector(train_selector_reference, point, tmp_path):
-    train_selector_reference.check_kill_and_resume(point, tmp_path / "out")
+@pytest.mark.parametrize("command", COMMANDS)
+def test_killed_and_resumed(command, point, request, tmp_path):
+    """Killed at `point` and resumed, `command` ends as its uninterrupted run ended."""
+    request.getfixturevalue(f"{command}_reference").check_kill_and_resume(point, tmp_path / "out")
 
 
 # ---------------------------------------------------------------- adversary stress-test

@@ -49,11 +49,6 @@ def collect_reference(tmp_path_factory):
     return Reference(_collect, tmp_path_factory.mktemp("collect"))
 
 
-@pytest.mark.parametrize("point", kill_point_params())
-def test_collect(collect_reference, point, tmp_path):
-    collect_reference.check_kill_and_resume(point, tmp_path / "out")
-
-
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory):
     """Three short intersection episodes (27 windows), the training commands' data."""
@@ -86,22 +81,12 @@ def train_reference(dataset, train_folder):
     return Reference(_train(dataset), train_folder)
 
 
-@pytest.mark.parametrize("point", kill_point_params())
-def test_train(train_reference, point, tmp_path):
-    train_reference.check_kill_and_resume(point, tmp_path / "out")
-
-
 @pytest.fixture(scope="module")
 def train_baseline_reference(dataset, tmp_path_factory):
     def argv(out, resume):
         return ["riskmap", "train-baseline", "cnn", "--data", str(dataset), "--out", str(out),
                 "--quiet", *TINY_TRAINING] + _resume(resume)
     return Reference(argv, tmp_path_factory.mktemp("baseline"))
-
-
-@pytest.mark.parametrize("point", kill_point_params())
-def test_train_baseline(train_baseline_reference, point, tmp_path):
-    train_baseline_reference.check_kill_and_resume(point, tmp_path / "out")
 
 
 @pytest.fixture(scope="module")
@@ -114,11 +99,6 @@ def drive_reference(train_reference, train_folder, tmp_path_factory):
     return Reference(argv, tmp_path_factory.mktemp("drive"))
 
 
-@pytest.mark.parametrize("point", kill_point_params())
-def test_drive(drive_reference, point, tmp_path):
-    drive_reference.check_kill_and_resume(point, tmp_path / "out")
-
-
 @pytest.fixture(scope="module")
 def evaluate_reference(tmp_path_factory):
     def argv(out, resume):
@@ -129,22 +109,12 @@ def evaluate_reference(tmp_path_factory):
     return Reference(argv, tmp_path_factory.mktemp("evaluate"), ignore={"table.md"})
 
 
-@pytest.mark.parametrize("point", kill_point_params())
-def test_evaluate(evaluate_reference, point, tmp_path):
-    evaluate_reference.check_kill_and_resume(point, tmp_path / "out")
-
-
 @pytest.fixture(scope="module")
 def evaluate_commonroad_reference(tmp_path_factory):
     def argv(out, resume):
         return ["riskmap", "evaluate", "--commonroad", str(COMMONROAD), "--planners", "cv",
                 "--workers", "1", "--out", str(out), "--quiet"] + _resume(resume)
     return Reference(argv, tmp_path_factory.mktemp("evaluate_commonroad"))
-
-
-@pytest.mark.parametrize("point", kill_point_params())
-def test_evaluate_commonroad(evaluate_commonroad_reference, point, tmp_path):
-    evaluate_commonroad_reference.check_kill_and_resume(point, tmp_path / "out")
 
 
 @pytest.fixture(scope="module")
@@ -155,11 +125,6 @@ def guard_collect_reference(tmp_path_factory):
                 "--unseen-episodes", "1", "--planner-every", "99", "--episode-s", "2",
                 "--quiet"] + _resume(resume)
     return Reference(argv, tmp_path_factory.mktemp("guard_collect"))
-
-
-@pytest.mark.parametrize("point", kill_point_params())
-def test_guard_collect(guard_collect_reference, point, tmp_path):
-    guard_collect_reference.check_kill_and_resume(point, tmp_path / "out")
 
 
 def _guard_windows(path: Path, n: int, seed: int) -> None:
@@ -197,9 +162,16 @@ def guard_train_reference(tmp_path_factory):
     return Reference(argv, folder)
 
 
+# Every command above, by the name of its `<command>_reference` fixture.
+COMMANDS = ("collect", "train", "train_baseline", "drive", "evaluate", "evaluate_commonroad", "guard_collect",
+            "guard_train")
+
+
 @pytest.mark.parametrize("point", kill_point_params())
-def test_guard_train(guard_train_reference, point, tmp_path):
-    guard_train_reference.check_kill_and_resume(point, tmp_path / "out")
+@pytest.mark.parametrize("command", COMMANDS)
+def test_killed_and_resumed(command, point, request, tmp_path):
+    """Killed at `point` and resumed, `command` ends as its uninterrupted run ended."""
+    request.getfixturevalue(f"{command}_reference").check_kill_and_resume(point, tmp_path / "out")
 
 
 def test_guard_train_reference_chooses_its_threshold_on_the_frames(guard_train_reference):

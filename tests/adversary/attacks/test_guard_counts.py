@@ -6,6 +6,7 @@ import pytest
 from adversary.attacks.crash import crash_record
 from adversary.attacks.episode import GUARD_FIELDS, RecordingPlanner, clear_guard, guard_counts, record_of
 from riskmap.sim.record import EpisodeRecord
+from tests.adversary.attacks.conftest import NeverPlans
 
 NONE = dict.fromkeys(GUARD_FIELDS)
 
@@ -25,15 +26,9 @@ class _StubGuard:
         self._summary = {"frames": 0, "interventions": 0, "hard": 0}
 
 
-class _GuardedStub:
+class _GuardedStub(NeverPlans):
     def __init__(self, guard):
         self.guard = guard
-
-    def reset(self, scene):
-        pass
-
-    def plan(self, scene):
-        raise AssertionError("not called here")
 
 
 class _Plain:

@@ -2,9 +2,10 @@
 
 from adversary.attacks.episode import RecordingPlanner
 from riskmap.sim.plan import requires_log
+from tests.adversary.attacks.conftest import NeverPlans
 
 
-class _Declares:
+class _Declares(NeverPlans):
     requires_log = True
     name = "declares"
 
@@ -16,12 +17,6 @@ class _Declares:
 
     def set_log(self, log):
         self.log = log
-
-    def reset(self, scene):
-        pass
-
-    def plan(self, scene):
-        raise AssertionError("not called here")
 
 
 def test_the_wrapper_forwards_attach_and_the_log_declarations():
