@@ -59,6 +59,7 @@ from riskmap.infra.config_mapping import require
 from riskmap.registry import cached_planner
 from riskmap.sim.metrics import coarse_collision_name
 from riskmap.sim.plan import drives_itself
+from riskmap.sim.plan_checks import ImplausiblePlans
 from riskmap.sim.record import EpisodeRecord, current_names
 
 # CRASH's SELECTORS (adversary.crash.selection), spelt out so that reading a config does not
@@ -140,20 +141,21 @@ def _models(traffic: Path, selector: Path | None):
 
 
 def _crash_fields(collided: bool, off_road: bool, distance_m: float | None, min_gap_m: float | None,
-                  simulated_s: float | None, extra: dict) -> dict:
+                  simulated_s: float | None, extra: dict, plans: ImplausiblePlans | None = None) -> dict:
     """Job record fields in the `EpisodeRecord` layout. The judge measures no speed and no plan
     times (None), and its episode is no campaign-seeded one (env_seed None); the guard's counts
-    are None unless `extra` holds them."""
+    are None unless `extra` holds them. `plans`: the implausible plans over the scene's drives."""
     return job_fields(EpisodeRecord(
         planner="", collided=collided, off_road=off_road, simulated_s=simulated_s,   # planner: dropped
         distance_m=distance_m, mean_speed_mps=None, min_gap_m=min_gap_m, plan_calls=None,
-        plan_ms_median=None, plan_ms_mean=None, plan_ms_p90=None,
+        plan_ms_median=None, plan_ms_mean=None, plan_ms_p90=None, **(plans or ImplausiblePlans()).fields(),
         extra={**dict.fromkeys(GUARD_FIELDS), **extra, "env_seed": None}))
 
 
-def _not_attacked(reason: str, extra: dict, timing: dict | None = None) -> dict:
+def _not_attacked(reason: str, extra: dict, timing: dict | None = None,
+                  plans: ImplausiblePlans | None = None) -> dict:
     """The record of a job whose scene could not be attacked (module docstring)."""
-    return _crash_fields(False, False, None, None, None, {
+    return _crash_fields(False, False, None, None, None, plans=plans, extra={
         "attacked": False, "not_attacked": reason,
         "has_adversary": False, "collided_with_adversary": False, "collision_type": None,
         "collision_time_s": None, "kinematic_mps": None, "adversary_off_road": None,
@@ -168,8 +170,11 @@ def crash_record(result: dict, scene_s: float, guard: dict | None = None) -> dic
     extra = {"selector": result["selector"], "p": result["p"], "candidates": result["candidates"],
              "agents": result["agents"]}
     timing = {"attack_seconds": round(result["seconds"], 3)}
+    plans = ImplausiblePlans()
+    plans.add_record(result)              # the closed-loop drives ran even without a candidate
     if result["status"] != "ok":
-        return _not_attacked(f"no candidate adversary for selector {result['selector']}", extra, timing)
+        return _not_attacked(f"no candidate adversary for selector {result['selector']}", extra, timing,
+                             plans)
     m = current_names(result["metrics"])
     extra.update({"adversary_row": result["adversary_row"], "adversary_log_id": result["adversary_log_id"],
                   "iterations": result["generation"]["iterations"],
@@ -192,7 +197,7 @@ def crash_record(result: dict, scene_s: float, guard: dict | None = None) -> dic
         "encounters": None, "dangerous_encounters": None, "safety_pct": None,
         "solution_found": m["solution_found"], "failure": m.get("failure"), **(guard or {}),
         "attack_extra": extra,
-        "timing": {**timing, "generation_seconds": result["generation"]["batch_seconds"]}})
+        "timing": {**timing, "generation_seconds": result["generation"]["batch_seconds"]}}, plans)
 
 
 def _artifact(result: dict, panel: Path, recording: RecordingPlanner | None) -> bytes | None:

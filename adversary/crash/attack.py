@@ -11,7 +11,9 @@
        judge measures that rollout (STRIVE's metrics, `adversary.crash.judge.judge`)
 
 The record of one attack is JSON-ready: the scene, selector, p over the window rows, the
-adversary, the generated tracks, the metrics, and where the time went.
+adversary, the generated tracks, the metrics, where the time went, and the plans that failed the
+planner contract's checks over every drive of the scene (`implausible_plans`, with the first
+one's problems; `riskmap.sim.plan_checks`: driven as made, counted).
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ from adversary.crash.selection import (
 from adversary.crash.traffic_model import states_of
 from rasterize.errors import InputError
 from rasterize.timebase import REPLAN_HZ
+from riskmap.sim.plan_checks import ImplausiblePlans
 from riskmap.sim.rollout import check_replan_hz
 
 
@@ -159,6 +162,7 @@ def attack_records(records: list, models: Models, planner, planner_spec: str, co
     started = time.perf_counter()
     b = len(records)
     timing = [{"rollout_s": 0.0, "rollouts": 0} for _ in range(b)]
+    implausible = [ImplausiblePlans() for _ in range(b)]       # over every drive of a scene
     items = [scene_tensors(r.window, models.features) for r in records]
     model = models.traffic
     closed_loop = planner_spec != "replay"
@@ -171,6 +175,7 @@ def attack_records(records: list, models: Models, planner, planner_spec: str, co
                          planner_spec, replan_hz=config.replan_hz, keep_scene=keep_scene)
         timing[i]["rollout_s"] += time.perf_counter() - t
         timing[i]["rollouts"] += 1
+        implausible[i].add_record(result.drive)
         return tracks, result
 
     if closed_loop:
@@ -224,7 +229,8 @@ def attack_records(records: list, models: Models, planner, planner_spec: str, co
             out.append({**base, "status": "no_candidate", "collision": False,
                         "why": f"{n - 1} other vehicles in the window, none a candidate of the "
                                f"{config.selector} selector",
-                        "seconds": shared_s + timing[i]["rollout_s"], "timing": timing[i]})
+                        "seconds": shared_s + timing[i]["rollout_s"], "timing": timing[i],
+                        **implausible[i].fields()})
             continue
         tracks, final = drive(i, gen.traj[i].numpy(), keep_scene=keep_scenes)
         adv_row = int(item.rows[adversary])
@@ -247,7 +253,7 @@ def attack_records(records: list, models: Models, planner, planner_spec: str, co
                     "ego_states": np.round(final.states[final.ego][final.valid[final.ego]], 6).tolist(),
                     "timing": {**timing[i], "rollout_s": round(timing[i]["rollout_s"], 3)},
                     # this scene's rollouts plus an equal share of the batch's optimisation
-                    "seconds": shared_s + timing[i]["rollout_s"]})
+                    "seconds": shared_s + timing[i]["rollout_s"], **implausible[i].fields()})
         if keep_scenes:
             out[-1]["final_scene"] = final.final_scene
             adv = final.recorder_id(int(record.agent_ids[adv_row]))

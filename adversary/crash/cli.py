@@ -109,7 +109,7 @@ def default_models(scenes: Path, traffic: str | None, selectors: str | None) -> 
 
 def _run_attack(args: argparse.Namespace) -> int:
     from adversary.crash.attack import AttackConfig
-    from adversary.crash.run import TABLE_HEADER, run_attacks, table_row
+    from adversary.crash.run import TABLE_HEADER, implausible_line, run_attacks, table_row
 
     config = AttackConfig(selector=args.selector, replan_every=args.replan_every,
                           iterations_replay=args.iterations or 300,
@@ -123,8 +123,10 @@ def _run_attack(args: argparse.Namespace) -> int:
                           traffic, selectors if needs_selector else None,
                           workers=args.workers, resume=args.resume, panels=args.panels,
                           progress=not args.quiet, batch_size=args.batch_size)
+    label = f"{display_name(args.planner)} / {args.selector}"
     print(TABLE_HEADER)
-    print(table_row(f"{display_name(args.planner)} / {args.selector}", summary["summary"]))
+    print(table_row(label, summary["summary"]))
+    print(implausible_line(label, summary["summary"]), end="")
     return 0
 
 

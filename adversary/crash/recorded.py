@@ -388,7 +388,8 @@ def rollout_recorded(record: SceneRecord, log: HumanLog, planner, planner_spec: 
         planner_spec, world.contact is not None, world.off_network, round(world.time_s - world.start, 3),
         loop.distance_m, loop.speeds, loop.gaps, loop.plan_times_s,
         extra={"recording": traffic.name, "ego_id": int(scene.ego_id), "start_s": round(world.start, 3),
-               "contact": world.contact, "driver": type(driver).__name__}).as_dict()
+               "contact": world.contact, "driver": type(driver).__name__},
+        **loop.implausible.fields()).as_dict()
     final_scene = _final_scene(traffic, states, valid, ego, log.dt_s, scene.env_id) if keep_scene else None
     stride = round(WINDOW_DT_S / log.dt_s)
     windows = tuple(_scene_at(traffic, states, valid, ego, log.dt_s, scene.env_id, k,

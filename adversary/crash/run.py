@@ -11,7 +11,9 @@ Attacks: OUT/attacks/<scene>.json, one per scene, written atomically as soon as 
 finishes (`--batch-size` scenes are optimised together: one Adam step updates all of them, which
 costs little more than one scene on a CPU; batches are fixed slices of the scene list); `--resume`
 runs again only the batches with a scene not there, and writes only the missing records.
-OUT/summary.json and OUT/table.md aggregate them (denominators included). With `--workers K`
+OUT/summary.json and OUT/table.md aggregate them (denominators included); plans that failed the
+planner contract's checks are summed in the summary (`implausible_plans`, the scenes with any,
+the first one's problems) and named in a line under the table when there are any. With `--workers K`
 scenes run in a process pool; every scene's random draws depend only on (seed, scene), so results
 do not depend on K.
 """
@@ -32,6 +34,7 @@ from riskmap.infra.atomic import atomic_write, write_json
 from riskmap.infra.parallel import run_parallel
 from riskmap.infra.provenance import provenance
 from riskmap.infra.rundir import claim_out_dir, lock_out_dir, read_settings, refuse_unless_resume
+from riskmap.sim.plan_checks import implausible_note, summarise_implausible
 from riskmap.sim.record import current_names
 
 INDEX = "index.json"
@@ -250,6 +253,8 @@ def summarise(records: list[dict]) -> dict:
         "iterations_mean": float(np.mean([r["generation"]["iterations"] for r in ok])) if ok else None,
         "rollouts_mean": float(np.mean([r["timing"]["rollouts"] for r in ok])) if ok else None,
         "replans_mean": float(np.mean([r["generation"]["replans"] for r in ok])) if ok else None,
+        # over every drive of the scenes that ran (implausible_plan_episodes: scenes with any)
+        **summarise_implausible([r for r in records if r["status"] != "error"], lambda r: f"on {r['name']}"),
     }
 
 
@@ -285,6 +290,15 @@ def table_row(label: str, s: dict) -> str:
 TABLE_HEADER = ("| run | valid avoidable at-fault (%, 95% CI) | collision (%, 95% CI) | valid | avoidable | "
                 "at fault / struck from behind / side | adv off-road % | other off-road % | kinematic value m/s | "
                 "solution % | s/scene |\n|---|---|---|---|---|---|---|---|---|---|---|")
+
+
+def implausible_line(label: str, s: dict) -> str:
+    """The line under the table when the planner made implausible plans ("" otherwise)."""
+    return implausible_note({label: (s, s["scenes"])}, unit="scenes")
+
+
+def _paragraph(text: str) -> str:
+    return "\n" + text if text else ""
 
 
 # Under every written table: where its columns are defined.
@@ -355,5 +369,6 @@ def run_attacks(planner_spec: str, scenes_dir: Path, count: int, config: AttackC
     write_json(out / "summary.json", summary)
     label = f"{display_name(planner_spec)} / {config.selector}"
     atomic_write(out / "table.md", lambda f: f.write(
-        (TABLE_HEADER + "\n" + table_row(label, summary["summary"]) + "\n\n" + TABLE_NOTE + "\n").encode()))
+        (TABLE_HEADER + "\n" + table_row(label, summary["summary"]) + "\n\n" + TABLE_NOTE + "\n"
+         + _paragraph(implausible_line(label, summary["summary"]))).encode()))
     return summary

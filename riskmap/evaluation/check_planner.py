@@ -2,7 +2,8 @@
 each, where it breaks the planner contract (README, "The planner contract").
 
 The planner drives short closed-loop episodes through the one rollout loop. Every plan it makes is
-checked; a plan that breaks the contract (or a call that raises) is recorded and replaced by a
+checked (`riskmap.sim.plan_checks.plan_problems`, the checks the loop itself counts in every
+command); a plan that breaks the contract (or a call that raises) is recorded and replaced by a
 constant-velocity plan so that the episode, and the check, go on. Then a few of the scenes it saw
 are planned again by two fresh planners of the same SPEC and seed (determinism), and the time per
 call is compared with the replan period.
@@ -19,12 +20,10 @@ import numpy as np
 
 from rasterize.timebase import REPLAN_HZ
 from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, Plan
+from riskmap.sim.plan_checks import plan_problems
 
 FAMILY_ENVS = ("highway-v0", "merge-v0", "roundabout-v0", "intersection-v0")
 REPLAN_PERIOD_S = 1 / REPLAN_HZ   # the rollout replans at 2 Hz (0.5 s)
-MAX_SPEED_MS = 60.0          # faster than any road vehicle here: the waypoints are not metres
-MAX_ACCEL_MS2 = 10.0         # beyond hard braking: the first waypoint does not start at the ego
-KMH_PER_MS = 3.6
 
 
 @dataclass(frozen=True)
@@ -63,57 +62,6 @@ def _cv(scene) -> Plan:
     speed = float(scene.ego_state()[4])
     x = speed * PLAN_DT_S * np.arange(1, PLAN_STEPS + 1)
     return Plan(np.stack([x, np.zeros(PLAN_STEPS)], axis=1))
-
-
-def plan_problems(plan, speed: float) -> list[str]:
-    """What is wrong with `plan` made at ego speed `speed` (m/s); empty if nothing."""
-    if not isinstance(plan, Plan):
-        return [f"plan() returned a {type(plan).__name__}, not a riskmap.sim.plan.Plan"]
-    try:
-        waypoints = np.asarray(plan.waypoints, dtype=np.float64)
-    except (TypeError, ValueError):
-        return ["Plan.waypoints is not numeric; give a float array [12, 2]"]
-    if waypoints.shape != (PLAN_STEPS, 2):
-        return [f"Plan.waypoints has shape {waypoints.shape}; the contract is [12, 2] (6 s at 0.5 s)"]
-    if not np.isfinite(waypoints).all():
-        return ["Plan.waypoints holds NaN or inf; every waypoint must be finite"]
-    return _scale_problems(waypoints, speed) + _axis_problems(waypoints, speed)
-
-
-def _reach_m(speed: float) -> float:
-    """How far the first waypoint (0.5 s ahead) can be from the ego at `speed` (m/s)."""
-    return speed * PLAN_DT_S + 0.5 * MAX_ACCEL_MS2 * PLAN_DT_S ** 2 + 1.0
-
-
-def _scale_problems(waypoints: np.ndarray, speed: float) -> list[str]:
-    """Units and frame: km/h, world coordinates, impossible speeds (the first that applies)."""
-    steps = np.linalg.norm(np.diff(np.vstack([[0.0, 0.0], waypoints]), axis=0), axis=1) / PLAN_DT_S
-    first = float(np.linalg.norm(waypoints[0]))
-    if speed > 3.0 and abs(steps[0] / speed - KMH_PER_MS) < 0.4:
-        return [(f"the first step implies {steps[0]:.1f} m/s at a speed of {speed:.1f} m/s "
-                "(3.6x: km/h?); the waypoints are metres 0.5 s apart")]
-    if first > _reach_m(speed):
-        return [(f"the first waypoint is {first:.0f} m from the ego at {speed:.1f} m/s; "
-                "waypoints are in the ego frame (origin at the ego, x forward, y left), "
-                "not world coordinates")]
-    if steps.max() > MAX_SPEED_MS:
-        return [f"the waypoints imply {steps.max():.0f} m/s; they are metres 0.5 s apart"]
-    return []
-
-
-def _axis_problems(waypoints: np.ndarray, speed: float) -> list[str]:
-    """In one second at speed no vehicle turns by more than about 60 degrees: the plan's first
-    second must point forward (x), else its axes are not the ego frame's."""
-    second = waypoints[round(1.0 / PLAN_DT_S) - 1]
-    if speed <= 3.0 or np.linalg.norm(waypoints[0]) > _reach_m(speed) \
-            or np.linalg.norm(second) <= 0.5 * speed:
-        return []
-    angle = np.degrees(abs(np.arctan2(second[1], second[0])))
-    if angle > 120:
-        return ["the plan runs backwards at speed; x points forward in the ego frame"]
-    if angle > 60:
-        return ["the plan runs sideways at speed; x is forward and y left (swapped axes?)"]
-    return []
 
 
 class _Checking:

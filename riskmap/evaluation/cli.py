@@ -27,6 +27,9 @@ def _cmd_drive(args: argparse.Namespace) -> int:
           f"{summary['collision_rate']:.2f}, distance {summary['distance_m']:.0f} m, "
           f"min gap {gap}, yielding events {summary['yield_events'] or 0:.2f} per episode "
           f"-> {Path(args.out) / 'summary.json'}")
+    if summary["implausible_plans"]:
+        print(f"{summary['implausible_plans']} implausible plans (driven as made), first "
+              f"{summary['implausible_plan_first']}")
     return 0
 
 

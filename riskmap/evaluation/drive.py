@@ -19,6 +19,7 @@ from riskmap.infra.provenance import provenance
 from riskmap.infra.rundir import claim_out_dir
 from riskmap.registry import display_name, make_planner
 from riskmap.sim.episode import make_env
+from riskmap.sim.plan_checks import summarise_implausible
 from riskmap.sim.record import current_names
 from riskmap.sim.rollout import DriveConfig, DriveHooks, drive_episode
 
@@ -48,6 +49,8 @@ def summarise(records: list[dict]) -> dict:
         "plan_ms_median": float(np.median([r["plan_ms_median"] for r in records
                                            if r["plan_ms_median"] is not None]))
         if any(r["plan_ms_median"] is not None for r in records) else None,
+        # Plans that failed the planner contract's checks (driven as made), summed.
+        **summarise_implausible(records, lambda r: f"in episode {r['episode']}"),
     }
 
 

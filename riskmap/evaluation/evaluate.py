@@ -15,6 +15,9 @@ OUT/episodes.csv (one row per planner and episode), OUT/results.json (mean and 9
 over episodes) and OUT/table.md. `--resume` skips every file already written. The table shows
 each planner by its display name (`riskmap.registry.display_names`); the CSV and results.json
 carry the whole SPEC beside it, and the episode folders stay named by the SPEC (`planner_slug`).
+Plans that fail the planner contract's checks (`riskmap.sim.plan_checks`; driven as made) are
+counted per episode (`implausible_plans`, with the first one's problems) and per planner in
+results.json; the table gets a line under it naming the planners that made any.
 """
 
 from __future__ import annotations
@@ -47,6 +50,7 @@ from riskmap.sim.metrics import (
     safety_pct,
     summarise_metric,
 )
+from riskmap.sim.plan_checks import implausible_note, summarise_implausible
 from riskmap.sim.record import EpisodeRecord, current_names
 from riskmap.sim.rollout import check_replan_hz
 
@@ -56,7 +60,7 @@ METRICS = ("safety_pct", "ade_m", "goal_error_m", "distance_m", "jerk_mps3", "pl
 RATES = ("collided", "off_road")
 CSV_FIELDS = ("planner", "name", "label", "episode", "mode", "collided", "off_road", "safety_pct", "dangerous",
               "encounters", "ade_m", "goal_error_m", "distance_m", "jerk_mps3", "simulated_s",
-              "plan_ms_mean", "plan_ms_p90", "plan_calls")
+              "plan_ms_mean", "plan_ms_p90", "plan_calls", "implausible_plans")
 
 
 @dataclass(frozen=True)
@@ -165,13 +169,15 @@ def _table_record(spec: str, base: dict, metrics: dict, collided: bool, off_road
     from the drive (`drive_episode`'s record) and are None for the human, who is not driven."""
     metrics = dict(metrics)
     drive = drive or {"mean_speed_mps": None, "min_gap_m": None, "plan_calls": 0,
-                      "plan_ms_median": None, "plan_ms_mean": None, "plan_ms_p90": None}
+                      "plan_ms_median": None, "plan_ms_mean": None, "plan_ms_p90": None,
+                      "implausible_plans": 0, "implausible_plan_first": None}
     return EpisodeRecord(
         planner=spec, collided=bool(collided), off_road=bool(off_road),
         simulated_s=metrics.pop("simulated_s"), distance_m=metrics.pop("distance_m"),
         mean_speed_mps=drive["mean_speed_mps"], min_gap_m=drive["min_gap_m"],
         plan_calls=drive["plan_calls"], plan_ms_median=drive["plan_ms_median"],
         plan_ms_mean=drive["plan_ms_mean"], plan_ms_p90=drive["plan_ms_p90"],
+        implausible_plans=drive["implausible_plans"], implausible_plan_first=drive["implausible_plan_first"],
         extra={**base, **metrics}).as_dict()
 
 
@@ -240,6 +246,7 @@ def summarise(config: EvalConfig, records: list[dict]) -> dict:
         encounters = sum(r["encounters"] for r in rows)
         entry["safety_pct_pooled"] = safety_pct(dangerous, encounters)
         entry["encounters"] = encounters
+        entry.update(summarise_implausible(rows, lambda r: f"in episode {r['episode']}"))
         table[spec] = entry
     return table
 
@@ -271,7 +278,8 @@ def markdown_table(config: EvalConfig, table: dict) -> str:
             f"{pair('goal_error_m')} | {100 * entry['collided_rate']:.0f}% ({_counted(entry)}) | "
             f"{100 * entry['off_road_rate']:.0f}% | {pair('distance_m', 0)} | {pair('jerk_mps3')} | "
             f"{pair('plan_ms_mean', 1)} |")
-    return "\n".join(lines) + "\n"
+    note = implausible_note({entry["name"]: (entry, entry["episodes"]) for entry in table.values()})
+    return "\n".join(lines) + "\n" + ("\n" + note if note else "")
 
 
 def _check_out(config: EvalConfig, out: Path, resume: bool) -> dict:

@@ -26,6 +26,9 @@ its lane while the light for its turn is red, amber counted as red;
 `riskmap.sim.commonroad_replay`) are summed over the episodes beside the collisions, with the
 recorded humans' own count over the same episodes as the reference (`human`); records written
 before the count existed make it n/a.
+Plans that fail the planner contract's checks (`riskmap.sim.plan_checks`; driven as made) are
+summed the same way (`implausible_plans`, with the episodes that made any and the first one's
+problems) in results.json, and named in a line under the table when there are any.
 """
 
 from __future__ import annotations
@@ -49,8 +52,9 @@ from riskmap.infra.atomic import atomic_write, write_json
 from riskmap.infra.parallel import run_parallel
 from riskmap.infra.rundir import claim_out_dir
 from riskmap.registry import display_names
-from riskmap.sim.record import current_names
 from riskmap.sim.failures import summarise_failures
+from riskmap.sim.plan_checks import implausible_note, summarise_implausible
+from riskmap.sim.record import current_names
 
 METRICS = ("safety_pct", "ade_m", "goal_error_m", "distance_m", "human_distance_m", "min_gap_m")
 GAP_CAP_M = 1e3       # a min gap of None (nobody within the gap radius) counts as this far
@@ -127,6 +131,7 @@ def summarise(records: list[dict]) -> dict:
             **{k: classes[k] for k in ("at_fault", "struck_from_behind", "side", "avoidable", "counted",
                                        "unknown")},
             "off_road_rate": float(np.mean([r["off_road"] for r in records])),
+            **summarise_implausible(records, lambda r: f"on {r['scenario']} vehicle {r['ego_id']}"),
             **{key: stats(key) for key in METRICS}}
 
 
@@ -152,7 +157,8 @@ def markdown_table(results: dict) -> str:
             f"{100 * s['off_road_rate']:.0f}% | {s['ade_m']['mean']:.2f} / {s['ade_m']['p90']:.2f} | "
             f"{s['goal_error_m']['mean']:.2f} / {s['goal_error_m']['p90']:.2f} | "
             f"{s['distance_m']['mean']:.1f} | {s['human_distance_m']['mean']:.1f} |")
-    return "\n".join(lines) + "\n"
+    note = implausible_note({names[spec]: (s, s["episodes"]) for spec, s in results.items()})
+    return "\n".join(lines) + "\n" + ("\n" + note if note else "")
 
 
 def evaluate_commonroad(recordings: list[str | Path], planners: tuple[str, ...], out: Path,

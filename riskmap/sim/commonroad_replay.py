@@ -460,5 +460,5 @@ def replay_commonroad_episode(scenario_path, ego_id: int, planner, start_s: floa
         loop.distance_m, loop.speeds, loop.gaps, loop.plan_times_s,
         extra={"scenario": traffic.name, "ego_id": int(ego_id), "start_s": round(world.start, 3),
                "collision": world.collision, "signal_crossings": events, **human},
-        red_light_violations=sum(e["red"] for e in events))
+        red_light_violations=sum(e["red"] for e in events), **loop.implausible.fields())
     return record.as_dict()

@@ -5,13 +5,19 @@ traffic, or `LogReplayEpisode` replaying a record) or a `CommonRoadWorld` (a Com
 recording). For a planner the ego is handed over at the start to a vehicle that a tracking
 controller drives at the control rate, replanning at `replan_hz` from a 2 s history.
 `drive_episode` drives an `Episode` and reports the highway-env metrics.
+
+Every plan is checked against the planner contract (`riskmap.sim.plan_checks`): a plan that
+cannot be tracked (wrong shape, NaN/inf) stops the episode; an implausible one (km/h, world
+coordinates, impossible speeds, swapped axes) is driven as made and counted in
+`LoopRecord.implausible`, which goes into the episode record (`implausible_plans` and
+`implausible_plan_first`).
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -22,6 +28,7 @@ from rasterize.timebase import CONTROL_HZ, HISTORY_S, REPLAN_HZ
 from riskmap.sim.control import ControllerConfig, TrackingController
 from riskmap.sim.episode import FAMILY_SETUPS, Episode
 from riskmap.sim.plan import check_plan, drives_itself
+from riskmap.sim.plan_checks import ImplausiblePlans
 from riskmap.sim.record import EpisodeRecord
 from riskmap.sim.yield_events import YieldEventCounter
 
@@ -101,6 +108,7 @@ class LoopRecord:
     gaps: list[float]
     plan_times_s: list[float]
     yield_events: int = 0              # waits while a crossing vehicle passed (`yield_events`)
+    implausible: ImplausiblePlans = field(default_factory=ImplausiblePlans)   # driven as made
 
 
 class _Tracker:
@@ -112,6 +120,7 @@ class _Tracker:
         self.controller = TrackingController(ControllerConfig())
         self.since_plan = 0.0
         self.plan_times: list[float] = []
+        self.implausible = ImplausiblePlans()
 
     def _replan(self, k: int) -> None:
         world, hooks = self.world, self.hooks
@@ -120,6 +129,9 @@ class _Tracker:
         started = time.perf_counter()
         plan = check_plan(self.planner.plan(seen), type(self.planner).__name__)
         self.plan_times.append(time.perf_counter() - started)
+        # Counted, not replaced: tracking it as before keeps every good planner's drive unchanged,
+        # and the count tells that a run's numbers came from plans that break the contract.
+        self.implausible.check(plan, seen)
         # The plan is pinned to where the ego really is, not where a degraded scene shows it.
         origin, heading = ego_pose(scene)
         self.controller.set_plan(plan.waypoints, origin, heading)
@@ -173,7 +185,7 @@ def drive_world(world, planner, config: LoopConfig, hooks: DriveHooks = DriveHoo
         if world.done:
             break
     record = LoopRecord(human, distance, speeds, gaps, [] if tracker is None else tracker.plan_times,
-                        yields.finish())
+                        yields.finish(), ImplausiblePlans() if tracker is None else tracker.implausible)
     if hooks.on_end is not None:
         hooks.on_end(world, record)
     return record
@@ -195,5 +207,5 @@ def drive_episode(env, planner, config: DriveConfig, episode: int, hooks: DriveH
         getattr(planner, "name", "idm") if loop_record.drives_itself else type(planner).__name__, run.crashed, run.off_network,
         round(run.time_s, 3), loop_record.distance_m, loop_record.speeds, loop_record.gaps,
         loop_record.plan_times_s, extra={"episode": episode, "env_seed": run.seed, "driver": run.driver},
-        yield_events=loop_record.yield_events)
+        yield_events=loop_record.yield_events, **loop_record.implausible.fields())
     return record.as_dict()

@@ -113,3 +113,19 @@ def test_replan_hz_reaches_every_drive_and_the_default_keeps_old_run_json(scenes
     assert "replan_hz" not in json.loads((tmp_path / "default" / "run.json").read_text())["config"]
     with pytest.raises(InputError, match="must divide the 10 Hz"):
         AttackConfig(replan_hz=3)
+
+
+def test_implausible_plans_are_counted_over_every_drive_and_named_under_the_table(scenes, tmp_path):
+    kmh = "py:tests.broken_planners:Broken?fault=kmh&name=kmh"
+    config = AttackConfig(selector="distance", iterations_closed_loop=4, replan_every=2)
+    summary = run_attacks(kmh, scenes, 1, config, 0, tmp_path / "kmh", TRAFFIC, None,
+                          progress=False)["summary"]
+    record = json.loads((tmp_path / "kmh" / "attacks" / "scene_00001.json").read_text())
+    assert record["implausible_plans"] > 0 and "km/h?" in record["implausible_plan_first"]
+    assert summary["implausible_plans"] == record["implausible_plans"]
+    assert summary["implausible_plan_episodes"] == 1                  # scenes with any
+    assert summary["implausible_plan_first"].startswith("on scene_00001 at ")
+    table = (tmp_path / "kmh" / "table.md").read_text()
+    assert f"kmh / distance: {record['implausible_plans']} plans in 1 of 1 scenes" in table
+    good = run_attacks("cv", scenes, 1, config, 0, tmp_path / "cv", TRAFFIC, None, progress=False)["summary"]
+    assert good["implausible_plans"] == 0 and "Implausible" not in (tmp_path / "cv" / "table.md").read_text()

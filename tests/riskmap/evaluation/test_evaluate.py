@@ -161,3 +161,22 @@ def test_the_table_shows_display_names_and_the_records_keep_the_spec():
 def test_replan_hz_must_divide_the_control_rate():
     with pytest.raises(InputError, match="--replan-hz 3: must divide the 10 Hz"):
         EvalConfig(ENV, ("cv",), 1, replan_hz=3)
+
+
+@pytest.mark.slow
+def test_implausible_plans_are_counted_per_run_and_named_under_the_table(tmp_path):
+    """A planner whose plans are in km/h is still driven, and its run says so: results.json,
+    episodes.csv and a line under the table. A planner that keeps the contract counts 0."""
+    kmh = "py:tests.broken_planners:Broken?fault=kmh&name=kmh"
+    out = tmp_path / "ev"
+    assert main(["evaluate", "--planners", f"cv,{kmh}", "--env", ENV, "--episodes", "1", "--seed", "11",
+                 "--episode-s", "2", "--out", str(out), "--quiet"]) == 0
+    results = json.loads((out / "results.json").read_text())["planners"]
+    assert results[kmh]["implausible_plans"] == 4 and results[kmh]["implausible_plan_episodes"] == 1
+    assert results[kmh]["implausible_plan_first"].startswith("in episode 0 at 0.0 s: the first step implies")
+    assert results["cv"]["implausible_plans"] == 0 and results["cv"]["implausible_plan_first"] is None
+    rows = (out / "episodes.csv").read_text().splitlines()
+    assert rows[0].endswith(",plan_calls,implausible_plans") and rows[1].endswith(",4,0")
+    table = (out / "table.md").read_text()
+    assert "Implausible plans" in table and "kmh: 4 plans in 1 of 1 episodes" in table and "km/h?" in table
+    assert "cv:" not in table

@@ -137,3 +137,16 @@ def test_max_episodes_evaluates_a_seeded_choice_of_recorded_vehicles(tmp_path, c
     assert main(["evaluate", "--commonroad", str(FIXTURES), "--planners", "replay", "--episodes",
                  "2", "--out", str(tmp_path / "bad")]) == 2
     assert "--max-episodes" in capsys.readouterr().err
+
+
+def test_implausible_plans_on_recordings_are_summed_and_named_under_the_table(tmp_path):
+    kmh = "py:tests.broken_planners:Broken?fault=kmh&name=kmh"
+    out = tmp_path / "cr"
+    results = evaluate_commonroad([FIXTURES], ("cv", kmh), out, progress=False, limit=1)
+    assert results[kmh]["implausible_plans"] > 0 and results[kmh]["implausible_plan_episodes"] == 1
+    first = results[kmh]["implausible_plan_first"]
+    assert "km/h?" in first and " vehicle " in first                 # where it first happened
+    assert results["cv"]["implausible_plans"] == 0 and results["cv"]["implausible_plan_first"] is None
+    table = (out / "table.md").read_text()
+    assert f"kmh: {results[kmh]['implausible_plans']} plans in 1 of 1 episodes" in table
+    assert "cv:" not in table
