@@ -21,18 +21,15 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 
 from rasterize.frames import ego_from_grid, ego_from_world, ego_pose
 from riskmap.data.dataset import DemoDataset
+from riskmap.figures.ablation import pyplot, write_table
 from riskmap.infra.atomic import write_json
 from riskmap.planner.riskmap_planner import RiskMapPlanner
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))   # ablation_output, however the script is started
-from ablation_output import pyplot, write_table  # noqa: E402
 
 VARIANCES = (2.0, 5.0)               # cells²
 CLASSES = (("straight", 0.0, 10.0), ("slow turn", 10.0, 45.0), ("large turn", 45.0, 360.0))

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -24,11 +23,9 @@ import torch
 
 from riskmap.data.dataset import DemoDataset
 from riskmap.evaluation.open_loop import window_errors
+from riskmap.figures.ablation import print_row, pyplot, save_figure, write_table
 from riskmap.infra.atomic import write_json
 from riskmap.planner.riskmap_planner import RiskMapPlanner
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))   # ablation_output, however the script is started
-from ablation_output import print_row, pyplot, save_figure, write_table  # noqa: E402
 
 RUNS = {25: "runs/highway_r25", 50: "runs/highway_v1", 75: "runs/highway_r75", 100: "runs/highway_r100"}
 

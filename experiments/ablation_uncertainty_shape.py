@@ -18,7 +18,6 @@ centre to centre). Writes experiments/results/ablation_uncertainty_shape/.
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -26,11 +25,9 @@ import numpy as np
 from rasterize.frames import ego_from_world, ego_pose
 from rasterize.maps import uncertainty_map
 from riskmap.data.dataset import DemoDataset
+from riskmap.figures.ablation import print_row, write_table
 from riskmap.infra.atomic import write_json
 from riskmap.planner.riskmap_planner import RiskMapPlanner
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))   # ablation_output, however the script is started
-from ablation_output import print_row, write_table  # noqa: E402
 
 SHAPES = {"0.5/0.5": "runs/highway_v10_s05_05", "0.5/1.5": "runs/highway_v10",
           "2/2": "runs/highway_v10_s2_2"}

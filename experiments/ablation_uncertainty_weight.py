@@ -16,18 +16,15 @@ Writes experiments/results/ablation_uncertainty_weight/{results.json,table.md,ab
 from __future__ import annotations
 
 import argparse
-import sys
 from pathlib import Path
 
 import numpy as np
 
 from riskmap.evaluation.drive import drive
 from riskmap.evaluation.open_loop import evaluate
+from riskmap.figures.ablation import print_row, pyplot, save_figure, write_table
 from riskmap.infra.atomic import write_json
 from riskmap.sim.rollout import DriveConfig
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))   # ablation_output, however the script is started
-from ablation_output import print_row, pyplot, save_figure, write_table  # noqa: E402
 
 
 def main() -> None:

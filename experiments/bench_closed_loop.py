@@ -21,13 +21,12 @@ import statistics
 import time
 from pathlib import Path
 
+from riskmap.planner.shipped import shipped_spec
 from riskmap.registry import make_planner
 from riskmap.sim.episode import make_env
 from riskmap.sim.rollout import DriveConfig, drive_episode
 
 ENVS = ("highway-v0", "intersection-v0")
-CHECKPOINTS = {"highway-v0": "riskmap:checkpoints/riskmap_highway",
-               "intersection-v0": "riskmap:checkpoints/riskmap_intersection"}
 SAME = ("simulated_s", "distance_m", "collided", "off_road", "min_gap_m", "mean_speed_mps")
 
 
@@ -80,7 +79,7 @@ def main() -> None:
     rows = []
     for spec in specs:
         for env_id in ENVS:
-            rows += bench(env_id, CHECKPOINTS[env_id] if spec == "checkpoint" else spec,
+            rows += bench(env_id, shipped_spec("riskmap", env_id) if spec == "checkpoint" else spec,
                           cli.episodes, cli.seed, cli.seconds)
     ratios = {}
     for plain, fast in zip(rows[0::2], rows[1::2]):

@@ -28,21 +28,12 @@ import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from adversary.crash.attack import AttackConfig
+from adversary.crash.attack import REPLAN_EVERY, AttackConfig
 from adversary.crash.run import TABLE_HEADER, run_attacks, summarise, table_row
 from riskmap.infra.atomic import atomic_write, write_json
+from riskmap.planner.shipped import FAMILIES, shipped_spec
 
 ROOT = Path(__file__).resolve().parents[1]
-FAMILIES = ("highway", "intersection", "us101")
-PLANNERS = {
-    "replay": "replay",
-    "idm": "idm",
-    "riskmap": {"highway": "riskmap:checkpoints/riskmap_highway",
-                "intersection": "riskmap:checkpoints/riskmap_intersection",
-                "us101": "riskmap:checkpoints/riskmap_us101"},
-}
-# A risk-aware planner rollout costs ~8x an IDM one on this CPU: it is re-run every 50 iterations.
-PLANNER_K = {"replay": 20, "idm": 20, "riskmap": 50}
 LABELS = {"distance": "DS", "distance+mam": "DS+MAM", "crash-no-mam": "ASM", "crash": "MAM+ASM",
           "nearest": "nearest", "random": "random"}
 
@@ -88,9 +79,8 @@ def run_dir(family: str, run: Run) -> Path:
 
 
 def attack(family: str, run: Run, count: int, workers: int) -> dict:
-    spec = PLANNERS[run.planner]
-    spec = spec[family] if isinstance(spec, dict) else spec
-    config = AttackConfig(**{"selector": run.selector, "replan_every": PLANNER_K[run.planner], **run.settings})
+    spec = shipped_spec(run.planner, family)
+    config = AttackConfig(**{"selector": run.selector, "replan_every": REPLAN_EVERY[run.planner], **run.settings})
     selectors = ROOT / (run.selector_model.format(family=family) or f"checkpoints/crash_selector_{family}")
     return run_attacks(spec, ROOT / "data" / "attack" / family, count, config, seed=0, out=run_dir(family, run),
                        traffic=ROOT / "checkpoints" / f"crash_traffic_{family}", selectors=selectors,

@@ -8,7 +8,7 @@ alone replayed against the guarded variants), the adversary here meets the guard
 optimises: its replanned closed-loop drives run the guarded planner.
 
 Every attack record is then driven once more by the planner it attacked
-(`guard_adversarial.drive_record`) to read the guard's decision frames and interventions and the
+(`adversary.crash.redrive`) to read the guard's decision frames and interventions and the
 ego's progress; the table compares the variants on the scenes all three finished, with 95%
 Wilson intervals on the collision rates.
 
@@ -25,40 +25,36 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 
+from adversary.crash.attack import REPLAN_EVERY, AttackConfig
+from adversary.crash.guard_data import read_attack_run
+from adversary.crash.redrive import redrive_attack
+from adversary.crash.run import run_attacks
+from adversary.crash.scenes import load_record
+from riskmap.evaluation.guard_tables import intervention_totals, print_table, ratio_cell
+from riskmap.infra.atomic import write_json
+from riskmap.infra.stats import wilson
+from riskmap.planner.shipped import shipped_spec
+from riskmap.registry import cached_planner
+
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "experiments"))
-
-from crash_tables import PLANNER_K, PLANNERS, Run, run_dir  # noqa: E402
-from guard_adversarial import drive_record  # noqa: E402
-from guard_eval import intervention_totals, print_table, ratio_cell  # noqa: E402
-
-from adversary.crash.attack import AttackConfig  # noqa: E402
-from adversary.crash.guard_data import read_attack_run  # noqa: E402
-from adversary.crash.run import run_attacks  # noqa: E402
-from adversary.crash.scenes import load_record  # noqa: E402
-from riskmap.infra.atomic import write_json  # noqa: E402
-from riskmap.infra.stats import wilson  # noqa: E402
-
 OUT = ROOT / "out" / "guard_adaptive"
 VARIANTS = {"alone": "", "always": "guard-always:", "tgat": "guard:"}
 ATTACK = {"lr": 0.15}     # crash_tables.py's "lr0.15" rows: the attack's defaults
 
 
 def attack_dir(family: str, inner: str, variant: str) -> Path:
-    if variant == "alone":
-        return run_dir(family, Run(inner, "crash", "lr0.15", ATTACK))
+    if variant == "alone":        # crash_tables.py's run of planner `inner`, selector crash, variant lr0.15
+        return ROOT / "out" / "crash" / family / f"{inner}_crash_lr0.15"
     return OUT / family / f"{inner}_{variant}"
 
 
 def attack(family: str, inner: str, variant: str, count: int) -> None:
-    spec = PLANNERS[inner]
-    spec = VARIANTS[variant] + (spec[family] if isinstance(spec, dict) else spec)
-    config = AttackConfig(selector="crash", replan_every=PLANNER_K[inner], **ATTACK)
+    spec = VARIANTS[variant] + shipped_spec(inner, family)
+    config = AttackConfig(selector="crash", replan_every=REPLAN_EVERY[inner], **ATTACK)
     run_attacks(spec, ROOT / "data" / "attack" / family, count, config, seed=0,
                 out=attack_dir(family, inner, variant), traffic=ROOT / "checkpoints" / f"crash_traffic_{family}",
                 selectors=ROOT / "checkpoints" / f"crash_selector_{family}", resume=True, progress=True)
@@ -72,7 +68,9 @@ def drive(family: str, inner: str, variant: str, count: int) -> None:
         attack_record = json.loads((run.path / "attacks" / f"{name}.json").read_text())
         if path.exists() or attack_record.get("status") != "ok":
             continue
-        result = drive_record(load_record(run.scenes / f"{name}.npz"), attack_record, "alone", run.seed)
+        spec = attack_record["planner"]        # the attacked planner, guarded or not
+        result = redrive_attack(load_record(run.scenes / f"{name}.npz"), attack_record,
+                                cached_planner(spec, run.seed), spec)
         result.update({"scene": name, "attack_collision": bool(attack_record["collision"])})
         write_json(path, result)
 

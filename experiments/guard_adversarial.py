@@ -1,7 +1,7 @@
 """The guard's closed-loop table on adversarial scenes (the paper's Tables 2–3 analogue).
 
 CRASH attacks (`adversary attack`) were generated against a planner; here the same generated
-trajectories of the same scenes are driven again (`adversary.crash.judge.rollout`) by the
+trajectories of the same scenes are driven again (`adversary.crash.redrive`) by the
 planner alone, with the deceleration plan always on at high speed (`guard-always:SPEC`) and with
 the TGAT-triggered plan (`guard:SPEC`). The adversary does not react to the guard: the
 trajectories were optimised against the unguarded planner, so the guarded rows are a transfer
@@ -23,19 +23,16 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 
 from adversary.crash.guard_data import read_attack_run
-from adversary.crash.judge import judge, rollout
+from adversary.crash.redrive import redrive_attack
 from adversary.crash.scenes import load_record
+from riskmap.evaluation.guard_tables import intervention_totals, print_table, ratio_cell
 from riskmap.infra.atomic import write_json
 from riskmap.registry import cached_planner
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))   # guard_eval, however the script is started
-from guard_eval import intervention_totals, print_table, ratio_cell  # noqa: E402
 
 VARIANT_PREFIX = {"alone": "", "always": "guard-always:", "tgat": "guard:", "tgat-anyspeed": "guard:"}
 
@@ -98,31 +95,10 @@ def cell_name(variant: str) -> str:
 
 
 def drive_record(record, attack: dict, variant: str, seed: int) -> dict:
-    """One rollout of `attack`'s tracks with the attacked planner wrapped as `variant`."""
+    """One rollout of `attack`'s tracks with the attacked planner wrapped as `variant`
+    (`adversary.crash.redrive.redrive_attack`)."""
     planner, spec = variant_planner(variant, attack["planner"], seed)
-    tracks = np.asarray(attack["tracks"], dtype=np.float64)
-    rows = attack["metrics"]["spliced_rows"]
-    result = rollout(record, tracks, rows, planner, spec)
-    metrics = judge(record, tracks, rows, int(attack["adversary_row"]), planner, spec, result=result)
-    k0, ego = result.t0_step, result.ego
-    path = result.states[ego, k0:][result.valid[ego, k0:], :2]
-    guard = getattr(planner, "guard", None)
-    out = {"spec": spec, "variant": variant, "collision": bool(metrics["collision"]),
-           "collision_time_s": metrics["collision_time_s"], "collision_any": bool(metrics["collision_any"]),
-           "collision_before_t0": bool(metrics["collision_before_t0"]),
-           "progress_m": float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum()),
-           "progress_to_collision_m": metrics["distance_m"], "min_gap_m": metrics["min_gap_m"],
-           "rollout_s": result.wall_s}
-    if guard is not None:
-        summary = guard.summary()
-        out["guard"] = {k: summary[k] for k in ("frames", "interventions", "intervention_ratio", "single",
-                                                "sustained", "hard")}
-        # when System 2 took over (s of the episode) and the TGAT's highest score then
-        out["guard"]["interventions_s"] = [e["time_s"] for e in guard.log]
-        out["guard"]["max_scores"] = [e["max_score"] for e in guard.log]
-        out["guard"]["system1_ms_median"] = float(np.median(summary["system1_ms"])) if summary["system1_ms"] else None
-        out["guard"]["system2_ms_median"] = float(np.median(summary["system2_ms"])) if summary["system2_ms"] else None
-    return out
+    return {"variant": variant, **redrive_attack(record, attack, planner, spec)}
 
 
 def run(attack_dirs: list[Path], out: Path, variants: list[str], count: int) -> None:

@@ -24,17 +24,16 @@ from pathlib import Path
 
 import numpy as np
 
+from riskmap.evaluation.guard_tables import intervention_totals, print_table, ratio_cell
 from riskmap.guard.aggressors import AggressorHook
-from riskmap.infra.atomic import atomic_write, write_json
+from riskmap.infra.atomic import write_json
 from riskmap.infra.stats import wilson
+from riskmap.planner.shipped import shipped_spec
 from riskmap.registry import make_planner
 from riskmap.sim.failures import classify_run, summarise_failures
 from riskmap.sim.episode import make_env
 from riskmap.sim.rollout import DriveConfig, DriveHooks, drive_episode
 
-INNER = {"idm": {"highway-v0": "idm", "intersection-v0": "idm"},
-         "riskmap": {"highway-v0": "riskmap:checkpoints/riskmap_highway",
-                     "intersection-v0": "riskmap:checkpoints/riskmap_intersection"}}
 VARIANT_PREFIX = {"alone": "", "always": "guard-always:", "tgat": "guard:"}
 EPISODE_S = {"highway-v0": 20.0, "intersection-v0": 16.0}
 
@@ -51,12 +50,13 @@ def run_cell(out: Path, env_id: str, scene: str, inner: str, variant: str, episo
     tgat@CKPT (with the guard checkpoint CKPT, a path without suffix, and its own threshold)."""
     cell = out / env_id / scene / inner / variant.replace("/", "-")
     base, _, option = variant.partition("@")
-    spec = VARIANT_PREFIX[base] + INNER[inner][env_id]
+    inner_spec = shipped_spec(inner, env_id)
+    spec = VARIANT_PREFIX[base] + inner_spec
     threshold = _number(option) if option else None
     if option:
         from riskmap.guard.guarded import GUARD_CHECKPOINT, make_guarded
 
-        planner = make_guarded("tgat", INNER[inner][env_id], seed=seed, alert_threshold=threshold,
+        planner = make_guarded("tgat", inner_spec, seed=seed, alert_threshold=threshold,
                                checkpoint=GUARD_CHECKPOINT if threshold is not None else option)
     else:
         planner = make_planner(spec, seed=seed)
@@ -80,29 +80,6 @@ def run_cell(out: Path, env_id: str, scene: str, inner: str, variant: str, episo
             record["guard_log"] = guard.log
         write_json(path, record)
         print(f"{env_id} {scene} {inner} {variant} episode {episode}: collided {record['collided']}", flush=True)
-
-
-def intervention_totals(records: list[dict]) -> dict:
-    """Decision frames and System 2 take-overs summed over the records driven with a guard, and the
-    BDI intervention ratio (None where no decision frame was recorded: no guard, or it never ran)."""
-    frames = sum(r["guard"]["frames"] for r in records if "guard" in r)
-    interventions = sum(r["guard"]["interventions"] for r in records if "guard" in r)
-    return {"frames": frames, "interventions": interventions,
-            "intervention_ratio": interventions / frames if frames else None}
-
-
-def ratio_cell(row: dict) -> str:
-    """A row's BDI intervention ratio as a table cell ("–" where it has none)."""
-    return f"{row['intervention_ratio']:.3f}" if row["intervention_ratio"] is not None else "–"
-
-
-def print_table(rows: list[dict], markdown, prefix: Path | None) -> None:
-    """Print the markdown table of `rows`; with --table PREFIX, also write PREFIX.json (the rows)
-    and PREFIX.md (the table)."""
-    if prefix is not None:
-        write_json(prefix.with_suffix(".json"), rows)
-        atomic_write(prefix.with_suffix(".md"), lambda f: f.write(markdown(rows).encode()))
-    print(markdown(rows))
 
 
 def summarise(out: Path) -> list[dict]:

@@ -48,6 +48,9 @@ from riskmap.sim.rollout import check_replan_hz
 # 1 m/s² over a limit for one 0.5 s step costs about what 2 m of mean distance to the ego does.
 VALIDITY_COLLISION_WEIGHT = 20.0
 VALIDITY_KINEMATIC_WEIGHT = 5.0
+# k (`AttackConfig.replan_every`) per shipped planner (`riskmap.planner.shipped`): a risk-aware
+# planner rollout costs ~8x an IDM one on a CPU, so it is re-run every 50 iterations.
+REPLAN_EVERY = {"replay": 20, "idm": 20, "riskmap": 50}
 
 
 @dataclass(frozen=True)

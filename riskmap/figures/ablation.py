@@ -1,5 +1,5 @@
-"""What the ablation scripts (`ablation_*.py`) write, in one form: a progress line per result row,
-the markdown table (OUT/table.md, also printed) and the summary figure (OUT/ablation.png)."""
+"""What a planner ablation (experiments/ablation_*.py) writes, in one form: a progress line per
+result row, the markdown table (OUT/table.md, also printed) and the summary figure (OUT/ablation.png)."""
 
 from __future__ import annotations
 
