@@ -40,7 +40,7 @@ planner made by this registry, so it sits above it and the registry never import
 from __future__ import annotations
 
 from rasterize.errors import InputError
-from riskmap.sim.plan import HumanDriver
+from riskmap.sim.plan import HumanDriver, traits_of
 
 PLUGIN_GROUP = "riskmap.planners"
 SPECS = ("idm", "yielding", "cv", "replay", "riskmap:PATH", "cnn:PATH", "cnn_lstm:PATH", "rvsg:PATH",
@@ -199,7 +199,7 @@ def is_planner(obj) -> bool:
     with callable `reset` and `plan`."""
     if isinstance(obj, type):
         return False
-    return bool(getattr(obj, "drives_itself", False)) or all(
+    return bool(traits_of(obj).drives_itself) or all(
         callable(getattr(obj, method, None)) for method in ("reset", "plan"))
 
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from adversary.attacks.monitor import EpisodeMonitor
 from riskmap.registry import cached_planner
-from riskmap.sim.plan import drives_itself
+from riskmap.sim.plan import drives_itself, traits_of
 from riskmap.sim.record import EpisodeRecord
 
 # The guard's counts of one driven episode in a job record (None: no guard drove the ego).
@@ -31,7 +31,7 @@ def guard_of(planner):
     `riskmap.guard.guarded.Guard`), also through a wrapper that forwards attributes
     (`RecordingPlanner`); None for any other planner. Found by duck type (a `guard` with a
     `summary()`), so that the attacks do not import the guard and its models."""
-    guard = getattr(planner, "guard", None) if planner is not None else None
+    guard = traits_of(planner).guard
     return guard if callable(getattr(guard, "summary", None)) else None
 
 

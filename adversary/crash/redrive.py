@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from adversary.crash.judge import judge, rollout
+from riskmap.sim.plan import traits_of
 
 GUARD_SUMMARY_KEYS = ("frames", "interventions", "intervention_ratio", "single", "sustained", "hard")
 
@@ -29,7 +30,7 @@ def redrive_attack(record, attack: dict, planner, spec: str) -> dict:
            "progress_m": float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum()),
            "progress_to_collision_m": metrics["distance_m"], "min_gap_m": metrics["min_gap_m"],
            "rollout_s": result.wall_s}
-    guard = getattr(planner, "guard", None)
+    guard = traits_of(planner).guard
     if guard is not None:
         summary = guard.summary()
         out["guard"] = {k: summary[k] for k in GUARD_SUMMARY_KEYS}

@@ -44,6 +44,7 @@ from adversary.crash.scenes import WINDOW_DT_S, SceneRecord
 from riskmap.sim.alternatives import alternative_track, first_clear_alternative, safest_clear_alternative
 from rasterize.errors import InputError
 from riskmap.sim.metrics import box_off_road
+from riskmap.sim.plan import traits_of
 
 # Accelerations tried along the path, mildest first.
 ACCELS_MPS2 = (0.0, -2.0, 1.0, -4.0, 2.0, -6.0, -8.0)   # ties go to the mildest
@@ -241,7 +242,7 @@ def hardening_windows(record: SceneRecord, attack: dict, planner, planner_spec: 
         return HardenWindows((), {**info, "windows": 0, "why": NO_HISTORY})
     replay = ReplayPlanner()
     # Recorded scenes route the windows as the planner under attack is routed (its training rule).
-    replay.route_settings = getattr(planner, "route_settings", None)
+    replay.route_settings = traits_of(planner).route_settings
     tracks, rows = np.asarray(attack["tracks"]), attack["metrics"]["spliced_rows"]
     drove = rollout(record, tracks, rows, replay, "replay", ego_states=ego_full[:record.log.num_steps],
                     scene_steps=steps)

@@ -185,7 +185,7 @@ def planner_task(config: EvalConfig, out: Path, spec: str, episode: int) -> dict
     """Drive (or, for `idm`, read) one episode; returns its record of metrics."""
     from riskmap.sim.episode import Episode
     from riskmap.sim.log_replay import HumanLog, LogReplayEpisode
-    from riskmap.sim.plan import requires_log
+    from riskmap.sim.plan import traits_of
     from riskmap.sim.rollout import DriveConfig, drive_episode
 
     from riskmap.sim.failures import classify_failure, classify_run, first_contact
@@ -202,9 +202,10 @@ def planner_task(config: EvalConfig, out: Path, spec: str, episode: int) -> dict
         return _table_record(spec, base, metrics, log.crashed, log.off_road, None)
     env = cached_env(config.env_id, config.control_hz)
     planner = _planner(spec, config.seed)
-    replay = requires_log(planner)
+    traits = traits_of(planner)
+    replay = bool(traits.requires_log)
     if replay:
-        planner.set_log(log)
+        traits.set_log(log)
     if config.mode == "log":
         run = LogReplayEpisode(env, config.env_id, config.seed, episode, log, config.control_hz,
                                replay_ego=replay)

@@ -307,8 +307,9 @@ def plan_frame_writer(out_dir: Path, planner, stem: str, label: str, env_id: str
     of `env_id`'s family extent. A frame whose plan has no risk map says so in its title,
     naming the planner (`name`, default its class)."""
     from rasterize.config import FAMILY_EXTENTS, family_of_env
+    from riskmap.sim.plan import traits_of
 
-    raster = getattr(planner, "raster", None)
+    raster = traits_of(planner).raster
     if not isinstance(raster, RasterConfig):   # a plug-in may use the name for something else
         raster = RasterConfig(FAMILY_EXTENTS[family_of_env(env_id)])
     name = name or type(planner).__name__

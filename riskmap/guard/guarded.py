@@ -36,7 +36,9 @@ from rasterize.scene import Scene
 from riskmap.guard.events import nearest_neighbours
 from riskmap.guard.features import OBSERVED, SEGMENT_S
 from riskmap.registry import make_planner
-from riskmap.sim.plan import PLAN_DT_S, HumanDriver, Plan, drives_itself
+from riskmap.sim.plan import PLAN_DT_S, HumanDriver, Plan, drives_itself, traits_of
+from riskmap.sim.world import cap_ego_accel
+from riskmap.sim.world import history as world_history
 
 GUARD_CHECKPOINT = "checkpoints/guard_tgat"
 LOG = logging.getLogger("riskmap.guard")
@@ -112,9 +114,7 @@ class Guard:
         """The scene now with OBSERVED segments of history (from the recording when attached)."""
         if self.run is None:
             return fallback.past()
-        rec = self.run.recorder
-        return rec.scene(rec.num_steps - 1, history_s=SEGMENT_S * (OBSERVED - 1), future_s=0.0,
-                         dt_s=SEGMENT_S, radius_m=80.0, lanes=False)
+        return world_history(self.run, SEGMENT_S * (OBSERVED - 1), SEGMENT_S, 80.0)
 
     def step(self, scene: Scene) -> str | None:
         """One decision: returns None, "single", "sustained" or "hard" (and logs interventions)."""
@@ -150,6 +150,11 @@ class Guard:
     def braking_now(self) -> bool:
         return self.run is not None and self.run.time_s < self.brake_until_s
 
+    def accel_cap(self) -> float | None:
+        """The most acceleration the ego may have now (m/s²): minus the frame's deceleration
+        during a slowdown frame, None (no cap) otherwise (`World.cap_ego_accel`)."""
+        return -self.brake_mps2 if self.braking_now() else None
+
     def summary(self) -> dict:
         t = np.array(self.timings_s) if self.timings_s else np.zeros((0, 2))
         return {"frames": self.frames, "interventions": len(self.log),
@@ -174,7 +179,7 @@ class GuardedPlanner:
     def __init__(self, planner, predictor, agent, config: GuardConfig = GuardConfig()):
         self.planner = planner
         self.guard = Guard(predictor, agent, config)
-        self.raster = getattr(planner, "raster", None)   # for the drive harness's plan figures
+        self.raster = traits_of(planner).raster   # for the drive harness's plan figures
 
     def reset(self, scene: Scene) -> None:
         self.planner.reset(scene)
@@ -183,13 +188,7 @@ class GuardedPlanner:
     def attach(self, run) -> None:
         """Closed-loop hook: cap the ego's acceleration during slowdown frames."""
         self.guard.attach(run)
-        vehicle, guard = run.ego, self.guard
-        command = vehicle.command
-
-        def guarded_command(accel: float, steer_ccw: float) -> None:
-            command(min(accel, -guard.brake_mps2) if guard.braking_now() else accel, steer_ccw)
-
-        vehicle.command = guarded_command   # this vehicle object only, for this episode
+        cap_ego_accel(run, self.guard.accel_cap)
 
     def plan(self, scene: Scene) -> Plan:
         plan = self.planner.plan(scene)

@@ -63,7 +63,7 @@ from riskmap.sim.metrics import (
     safety_pct,
     stop_line_crossings,
 )
-from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, Plan
+from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, Plan, traits_of
 from riskmap.sim.reactive_traffic import ReactiveTraffic
 from riskmap.sim.record import EpisodeRecord
 from riskmap.sim.rollout import LoopConfig, check_replan_hz, drive_world
@@ -267,6 +267,14 @@ class CommonRoadWorld:
     def ego_state(self) -> np.ndarray:
         return self.track[-1]
 
+    def cap_ego_accel(self, cap) -> None:
+        self.vehicle.accel_cap = cap
+
+    def history(self, history_s: float, dt_s: float, radius_m: float) -> Scene:
+        config = dataclasses.replace(self.scene_config, history_s=history_s, dt_s=dt_s, radius_m=radius_m)
+        return _ego_scene(self.traffic, self.ego_index, self.track_t, self.track, self.time_s, None,
+                          config, self.others_at)
+
     def others_at(self, agents: np.ndarray, times_s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """States [len(agents), len(times_s), 6] and presence of other vehicles (indices into
         `traffic`) at times up to now: their recording in log mode, where they drove in reactive
@@ -423,7 +431,7 @@ def route_scene_config(planner, base: CommonRoadSceneConfig | None = None) -> Co
     recorded traffic sends itself as far as the recorded drivers went, not at highway-env's
     speeds)."""
     base = base or CommonRoadSceneConfig()
-    settings = getattr(planner, "route_settings", None)
+    settings = traits_of(planner).route_settings
     if not settings:
         return base
     return dataclasses.replace(base, speed_limit_mps=settings["speed_limit_mps"],

@@ -103,17 +103,27 @@ class TrackingController:
         return accel, float(np.clip(steer, -cfg.max_steer_rad, cfg.max_steer_rad))
 
 
+def capped_accel(accel: float, cap) -> float:
+    """`accel` held at most `cap()` (`riskmap.sim.world.World.cap_ego_accel`); as asked where
+    there is no cap or `cap()` is None."""
+    limit = None if cap is None else cap()
+    return accel if limit is None else min(accel, limit)
+
+
 def planned_vehicle_class():
     """A highway-env vehicle that keeps its route bookkeeping but drives by the action it is given."""
     from highway_env.vehicle.controller import ControlledVehicle
 
     class PlannedVehicle(ControlledVehicle):
+        accel_cap = None                  # set by its world's `cap_ego_accel`
+
         def act(self, action=None):
             self.follow_road()            # keeps lane and route up to date, as the IDM ego does
             if action is not None:
                 self.action = dict(action)
 
         def command(self, accel: float, steer_ccw: float) -> None:
+            accel = capped_accel(accel, self.accel_cap)
             self.action = {"acceleration": accel, "steering": -steer_ccw}   # highway-env: clockwise
 
     return PlannedVehicle

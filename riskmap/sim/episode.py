@@ -16,6 +16,7 @@ from rasterize.timebase import CONTROL_HZ
 from riskmap.sim import fast_road
 from riskmap.sim.control import hand_over_to_planner
 from riskmap.sim.metrics import centre_off_lane, min_box_gap, vehicle_box
+from riskmap.sim.world import recorded_history
 
 
 @dataclass(frozen=True)
@@ -222,6 +223,12 @@ class Episode:
 
     def min_gap(self, radius_m: float) -> float:
         return min_gap_on_road(self.base.road, self.ego, radius_m)
+
+    def cap_ego_accel(self, cap) -> None:
+        self.ego.accel_cap = cap      # the vehicle the planner commands applies it (a replayed one ignores commands)
+
+    def history(self, history_s: float, dt_s: float, radius_m: float) -> Scene:
+        return recorded_history(self.recorder, history_s, dt_s, radius_m)
 
     def replace_ego(self, vehicle) -> None:
         """Hand the ego over to another vehicle object at the same state (same recorded agent)."""

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from typing import Protocol, runtime_checkable
 
 import numpy as np
@@ -75,10 +75,10 @@ Plan.svf_steps = _lazy("svf_steps", "visitation per step [T, G, G], space-time p
 class Planner(Protocol):
     """What drives the ego: `reset` once per episode, `plan` at every replan (2 Hz).
 
-    Optional declarations the rollout reads (it never tests a planner's class):
-      drives_itself = True   the world's own IDM/MOBIL ego keeps driving; no plans (`HumanDriver`)
-      requires_log = True    needs the recorded episode: `set_log(log)` is called before driving
-      attach(world)          called once the ego is set up (the guard installs itself there)
+    A planner may also declare the optional attributes of `PlannerTraits` (`drives_itself`,
+    `requires_log`, `attach`, ...); whatever it leaves out takes the default listed there. They
+    are not members of this protocol, so that `isinstance(x, Planner)` still asks for the two
+    methods alone, and nothing reads them except through `traits_of`.
     """
 
     def reset(self, scene: Scene) -> None: ...
@@ -86,14 +86,68 @@ class Planner(Protocol):
     def plan(self, scene: Scene) -> Plan: ...
 
 
+def _declared(default, meaning: str, read_by: str):
+    """A `PlannerTraits` field: its default, what declaring it means and which code reads it."""
+    return field(default=default, metadata={"meaning": meaning, "read_by": read_by})
+
+
+@dataclass(frozen=True)
+class PlannerTraits:
+    """Every optional declaration a planner may make, as an attribute of the same name, with the
+    default a planner that does not declare it gets. The one list: `traits_of` reads a planner
+    by it, and the README's table of declarations is made from it (`declarations_table`)."""
+
+    drives_itself: bool = _declared(
+        False, "the world's own IDM/MOBIL ego keeps driving; `plan` is never called",
+        "riskmap.sim.rollout, riskmap.registry, riskmap.guard.guarded, check-planner")
+    requires_log: bool = _declared(
+        False, "needs the recorded episode: `set_log(log)` is called before it drives",
+        "riskmap.evaluation.evaluate")
+    set_log: Callable | None = _declared(
+        None, "`set_log(log)`: takes the recorded episode (with `requires_log`)",
+        "riskmap.evaluation.evaluate")
+    attach: Callable | None = _declared(
+        None, "`attach(world)`: called once the ego is set up, before the first step",
+        "riskmap.sim.rollout")
+    name: str = _declared(
+        "idm", "the name records give a planner that drives itself (others: their class name)",
+        "riskmap.sim.rollout")
+    raster: object | None = _declared(
+        None, "its `RasterConfig`: plan figures are drawn on it (else the family's extent)",
+        "riskmap.figures.panels, riskmap.guard.guarded")
+    route_settings: dict | None = _declared(
+        None, "the route rule of its recorded training data, used on CommonRoad recordings",
+        "riskmap.sim.commonroad_replay, adversary.harden.windows")
+    guard: object | None = _declared(
+        None, "its `riskmap.guard.guarded.Guard`: attack records report the guard's counts",
+        "adversary.attacks.episode")
+
+
+def traits_of(planner) -> PlannerTraits:
+    """What `planner` declares, each attribute it lacks at its `PlannerTraits` default (None for
+    no planner). Read by attribute, never by class, so that a wrapper forwarding attributes
+    declares what the planner inside it does."""
+    declared = {f.name: getattr(planner, f.name) for f in fields(PlannerTraits)
+                if planner is not None and hasattr(planner, f.name)}
+    return PlannerTraits(**declared)
+
+
+def declarations_table() -> str:
+    """The README's Markdown table of the optional declarations, one row per `PlannerTraits` field."""
+    rows = ["| declaration | default | meaning |", "| --- | --- | --- |"]
+    for f in fields(PlannerTraits):
+        rows.append(f"| `{f.name}` | `{f.default!r}` | {f.metadata['meaning']} |")
+    return "\n".join(rows)
+
+
 def drives_itself(planner) -> bool:
     """Whether `planner` declares that the world's own IDM/MOBIL ego keeps driving (`HumanDriver`)."""
-    return bool(getattr(planner, "drives_itself", False))
+    return bool(traits_of(planner).drives_itself)
 
 
 def requires_log(planner) -> bool:
     """Whether `planner` declares that it needs the recorded episode (`set_log`)."""
-    return bool(getattr(planner, "requires_log", False))
+    return bool(traits_of(planner).requires_log)
 
 
 def check_plan(plan: Plan, name: str) -> Plan:

@@ -27,7 +27,7 @@ from rasterize.frames import ego_pose
 from rasterize.timebase import CONTROL_HZ, HISTORY_S, REPLAN_HZ
 from riskmap.sim.control import ControllerConfig, TrackingController
 from riskmap.sim.episode import FAMILY_SETUPS, Episode
-from riskmap.sim.plan import check_plan, drives_itself
+from riskmap.sim.plan import check_plan, traits_of
 from riskmap.sim.plan_checks import ImplausiblePlans
 from riskmap.sim.record import EpisodeRecord
 from riskmap.sim.yield_events import YieldEventCounter
@@ -156,14 +156,15 @@ def drive_world(world, planner, config: LoopConfig, hooks: DriveHooks = DriveHoo
     whose `setup` belongs to the world's construction and is not used here)."""
     if hooks.on_reset is not None:
         hooks.on_reset(world)
-    human = drives_itself(planner)
+    traits = traits_of(planner)
+    human = bool(traits.drives_itself)
     tracker = None
     if not human:
         vehicle, first = world.hand_over(config.history_s)
         planner.reset(first)
         tracker = _Tracker(world, planner, vehicle, config, hooks)
-    if hasattr(planner, "attach"):
-        planner.attach(world)
+    if traits.attach is not None:
+        traits.attach(world)
     for hook in hooks.on_ready:
         hook(world)
     distance, speeds, gaps = 0.0, [], []
@@ -204,7 +205,7 @@ def drive_episode(env, planner, config: DriveConfig, episode: int, hooks: DriveH
                       config.control_hz // config.replan_hz, config.history_s, config.gap_radius_m)
     loop_record = drive_world(run, planner, loop, hooks)
     record = EpisodeRecord.measured(
-        getattr(planner, "name", "idm") if loop_record.drives_itself else type(planner).__name__, run.crashed, run.off_network,
+        traits_of(planner).name if loop_record.drives_itself else type(planner).__name__, run.crashed, run.off_network,
         round(run.time_s, 3), loop_record.distance_m, loop_record.speeds, loop_record.gaps,
         loop_record.plan_times_s, extra={"episode": episode, "env_seed": run.seed, "driver": run.driver},
         yield_events=loop_record.yield_events, **loop_record.implausible.fields())

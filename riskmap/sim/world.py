@@ -8,11 +8,13 @@ the scene is assembled, what counts as a collision, when the episode ends) stays
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Protocol
 
 import numpy as np
 
 from rasterize.scene import Scene
+from riskmap.sim.control import capped_accel
 
 
 class World(Protocol):
@@ -47,3 +49,45 @@ class World(Protocol):
 
     def min_gap(self, radius_m: float) -> float:
         """Smallest box gap (m) from the ego to another vehicle within `radius_m`; inf if none."""
+
+    def cap_ego_accel(self, cap: Callable[[], float | None]) -> None:
+        """For the rest of the episode every acceleration (m/s²) the ego's vehicle is commanded
+        is at most `cap()`, asked at each command (None: no cap now). The guard's slowdown frames
+        hold the ego to a deceleration this way, whatever the planner's controller asks for."""
+
+    def history(self, history_s: float, dt_s: float, radius_m: float) -> Scene:
+        """The scene now with `history_s` of everyone's past sampled every `dt_s`, others within
+        `radius_m`, no lanes: what the guard's accident predictor scores."""
+
+
+def cap_ego_accel(world, cap: Callable[[], float | None]) -> None:
+    """`world.cap_ego_accel(cap)`. A stand-in world that predates the method (a test's, whose ego
+    only has `command`) gets the cap wrapped around its ego's `command` instead."""
+    if hasattr(world, "cap_ego_accel"):
+        world.cap_ego_accel(cap)
+        return
+    vehicle = world.ego
+    vehicle.command = capped_command(vehicle.command, cap)   # this vehicle object only
+
+
+def capped_command(command: Callable[[float, float], None], cap: Callable[[], float | None]):
+    """`command(accel, steer_ccw)` with the acceleration held at most `cap()` (None: as asked)."""
+
+    def capped(accel: float, steer_ccw: float) -> None:
+        command(capped_accel(accel, cap), steer_ccw)
+
+    return capped
+
+
+def history(world, history_s: float, dt_s: float, radius_m: float) -> Scene:
+    """`world.history(...)`. A stand-in world that predates the method (a test's) is read from
+    its `recorder`, as the highway-env worlds record."""
+    if hasattr(world, "history"):
+        return world.history(history_s, dt_s, radius_m)
+    return recorded_history(world.recorder, history_s, dt_s, radius_m)
+
+
+def recorded_history(recorder, history_s: float, dt_s: float, radius_m: float) -> Scene:
+    """`World.history` from a `rasterize.highway.TrafficRecorder`: its last step, no lanes."""
+    return recorder.scene(recorder.num_steps - 1, history_s=history_s, future_s=0.0, dt_s=dt_s,
+                          radius_m=radius_m, lanes=False)

@@ -37,7 +37,7 @@ def test_the_example_is_evaluated_through_its_entry_point(installed, tmp_path):
                 "--env", "highway-v0", "--episodes", "2", "--episode-s", "8",
                 "--out", str(tmp_path / "eval"), "--quiet", cwd=tmp_path)
     assert done.returncode == 0, done.stderr
-    assert "| gap-keeper:25 | 2 |" in done.stdout
+    assert "| gap-keeper-25 | 2 |" in done.stdout          # the display name of the SPEC gap-keeper:25
     results = json.loads((tmp_path / "eval" / "results.json").read_text())
     assert "gap-keeper:25" in json.dumps(results)
 
