@@ -323,3 +323,22 @@ def test_keep_is_checked_and_older_runs_resume_without_it():
         HardenConfig("c", "s", "n", "o", keep="first")
     assert "keep" not in _settings(HardenConfig("c", "s", "n", "o"))
     assert _settings(HardenConfig("c", "s", "n", "o", keep="best"))["keep"] == "best"
+
+
+def test_the_shipped_hardened_planner_plans_as_its_original_does():
+    """checkpoints/riskmap_st_highway_hardened: a space-time round planner with the original's
+    sampler and planning settings (only the weights differ), which loads and plans."""
+    from pathlib import Path
+
+    from riskmap.registry import make_planner
+    from tests.scenes import constant_velocity_scene
+
+    root = Path(__file__).resolve().parents[3] / "checkpoints"
+    hardened = json.loads((root / "riskmap_st_highway_hardened.json").read_text())
+    original = json.loads((root / "riskmap_st_highway.json").read_text())
+    assert hardened["hardening"]["from"].endswith("riskmap_st_highway") and hardened["hardening"]["round"] == 1
+    assert hardened["planning"] == original["planning"] and hardened["sampler"] == original["sampler"]
+    assert hardened["spacetime"] == original["spacetime"]
+    planner = make_planner(f"riskmap:{root / 'riskmap_st_highway_hardened'}", seed=0)
+    plan = planner.plan(constant_velocity_scene(n_past=4, n_future=12, ego_speed=20.0))
+    assert plan.waypoints.shape == (12, 2) and plan.risk_steps is not None
