@@ -46,11 +46,22 @@ def search_rows(label: str, root: Path) -> list[dict]:
         s = json.loads(summary.read_text())
         cfg = s["config"]
         ci = wilson(s["collisions"], s["evaluations"])
+        # failures that count (valid, avoidable, at fault: riskmap.sim.failures); searches
+        # written before the classification have none
+        counted = (s.get("failures") or {}).get("counted")
+        counted_ci = wilson(counted, s["evaluations"]) if counted is not None else None
         rows.append({"planner": label, "spec": cfg["planner"], "template": cfg["template"],
                      "budget": f"{cfg['pop']} x {cfg['gen']}", "collisions": s["collisions"],
                      "evaluations": s["evaluations"], "share": s["collision_share"],
-                     "ci95": [ci["lo"], ci["hi"]]})
+                     "ci95": [ci["lo"], ci["hi"]], "counted": counted,
+                     "counted_ci95": [counted_ci["lo"], counted_ci["hi"]] if counted_ci else None})
     return rows
+
+
+def _share(k: int | None, n: int, ci: list[float] | None) -> str:
+    if k is None:
+        return "–"
+    return f"{k}/{n} ({100 * k / n:.0f}% [{100 * ci[0]:.0f}–{100 * ci[1]:.0f}])"
 
 
 def outcomes(attack_run: Path) -> dict[str, bool]:
@@ -142,9 +153,11 @@ def main(argv: list[str] | None = None) -> int:
         results["search"] += search_rows(label, root)
     if results["search"]:
         lines += ["### NSGA-II search at equal budget", "",
-                  "| planner | template | pop x gen | collisions / evaluations (share, 95% CI) |", "|---|---|---|---|"]
-        lines += [f"| {r['planner']} (`{r['spec']}`) | {r['template']} | {r['budget']} | {r['collisions']}/"
-                  f"{r['evaluations']} ({100 * r['share']:.0f}% [{100 * r['ci95'][0]:.0f}–{100 * r['ci95'][1]:.0f}]) |"
+                  "| planner | template | pop x gen | collisions / evaluations (share, 95% CI) "
+                  "| valid avoidable at-fault failures (share, 95% CI) |", "|---|---|---|---|---|"]
+        lines += [f"| {r['planner']} (`{r['spec']}`) | {r['template']} | {r['budget']} | "
+                  f"{_share(r['collisions'], r['evaluations'], r['ci95'])} | "
+                  f"{_share(r['counted'], r['evaluations'], r['counted_ci95'])} |"
                   for r in results["search"]]
     write_json(out / "results.json", results)
     atomic_write(out / "tables.md", lambda f: f.write(("\n".join(lines) + "\n").encode()))
