@@ -18,7 +18,8 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from rasterize.commonroad import RecordedTraffic, load_scenario
+from rasterize.commonroad.reader import load_scenario
+from rasterize.commonroad.tracks import RecordedTraffic
 from riskmap.data.collect_commonroad import CommonRoadCollectConfig, demonstrators, scenario_files
 from riskmap.infra.atomic import write_json
 from riskmap.registry import make_planner

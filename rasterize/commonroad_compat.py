@@ -2,7 +2,7 @@
 
 Every import of `commonroad` in the toolkit goes through this module, so that a release which
 moves a class changes this file only. Importing it imports commonroad-io (ImportError when that
-is not installed): import it inside the functions that need it, as `rasterize.commonroad` does.
+is not installed): import it inside the functions that need it, as `rasterize.commonroad.reader` does.
 
 What moved between 2024.3 and 2026.1 (the rest of the API used here is the same in both):
 - rectangles: 2024.3 has one `commonroad.geometry.shape.Rectangle(length, width, center,

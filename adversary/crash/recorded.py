@@ -46,13 +46,10 @@ from adversary.crash.scenes import (
     window_of,
     window_rows,
 )
-from rasterize.commonroad import (
-    CommonRoadSceneConfig,
-    RecordedTraffic,
-    SetBasedRecording,
-    lanes_from_lanelets,
-    load_scenario,
-)
+from rasterize.commonroad.config import CommonRoadSceneConfig
+from rasterize.commonroad.lanes import lanes_from_lanelets
+from rasterize.commonroad.reader import load_scenario
+from rasterize.commonroad.tracks import RecordedTraffic, SetBasedRecording
 from rasterize.errors import InputError
 from rasterize.frames import highway_env_from_world
 from rasterize.scene import Scene

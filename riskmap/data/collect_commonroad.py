@@ -49,12 +49,9 @@ from pathlib import Path
 
 import numpy as np
 
-from rasterize.commonroad import (
-    CommonRoadSceneConfig,
-    RecordedTraffic,
-    SetBasedRecording,
-    load_scenario,
-)
+from rasterize.commonroad.config import CommonRoadSceneConfig
+from rasterize.commonroad.reader import load_scenario
+from rasterize.commonroad.tracks import RecordedTraffic, SetBasedRecording
 from rasterize.config import FAMILY_EXTENTS, Extent, RasterConfig
 from rasterize.errors import InputError
 from rasterize.frames import ego_from_world, ego_pose

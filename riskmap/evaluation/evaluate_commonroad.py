@@ -38,7 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
-from rasterize.commonroad import RecordedTraffic, load_scenario
+from rasterize.commonroad.reader import load_scenario
+from rasterize.commonroad.tracks import RecordedTraffic
 from rasterize.errors import InputError
 from rasterize.timebase import REPLAN_HZ
 from riskmap.data.collect_commonroad import (

@@ -35,15 +35,11 @@ from pathlib import Path
 
 import numpy as np
 
-from rasterize.commonroad import (
-    CommonRoadSceneConfig,
-    RecordedTraffic,
-    governing,
-    lanes_from_lanelets,
-    load_scenario,
-    movement_red,
-    turn_between,
-)
+from rasterize.commonroad.config import CommonRoadSceneConfig
+from rasterize.commonroad.lanes import lanes_from_lanelets
+from rasterize.commonroad.lights import governing, movement_red, turn_between
+from rasterize.commonroad.reader import load_scenario
+from rasterize.commonroad.tracks import RecordedTraffic
 from rasterize.errors import InputError
 from rasterize.frames import (
     box_corners,

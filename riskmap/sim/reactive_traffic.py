@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rasterize.commonroad import RecordedTraffic
+from rasterize.commonroad.tracks import RecordedTraffic
 from rasterize.geometry import Polyline, arc_lengths
 from rasterize.scene import STATE_DIM
 from riskmap.sim.idm import idm_acceleration, idm_desired_gap

@@ -37,7 +37,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rasterize.commonroad import RecordedTraffic, _lanelet_under
+from rasterize.commonroad.route import _lanelet_under
+from rasterize.commonroad.tracks import RecordedTraffic
 from rasterize.errors import InputError
 from rasterize.frames import ego_from_world
 from rasterize.geometry import Polyline, drop_repeats

@@ -15,6 +15,10 @@ pytest.importorskip("highway_env")
 from riskmap.sim import fast_road
 from riskmap.sim.aggressive import AggressiveParams, install_aggressive_neighbour
 from riskmap.sim.episode import Episode, make_env
+from riskmap.sim.fast_road.act_window import _ActWindow
+from riskmap.sim.fast_road.collisions import _collision_candidates
+from riskmap.sim.fast_road.gaps import _min_gap_reference
+from riskmap.sim.fast_road.right_of_way import _rectangles_known
 from riskmap.sim.plan import HumanDriver, Plan
 from riskmap.sim.rollout import DriveHooks, LoopConfig, drive_world
 from riskmap.sim.yielding import YieldingDriver
@@ -208,7 +212,7 @@ def test_the_rectangle_shortcuts_agree_with_highway_env():
         p2 = p1 + rng.uniform(-6, 6, 2)
         r1 = (p1, *rng.uniform(3, 9, 1), *rng.uniform(1, 3, 1), float(rng.uniform(-4, 4)))
         r2 = (p2, *rng.uniform(3, 9, 1), *rng.uniform(1, 3, 1), float(rng.choice([0.0, np.pi / 2, rng.uniform(-4, 4)])))
-        known = fast_road._rectangles_known(r1, r2, float(np.linalg.norm(p2 - p1)))
+        known = _rectangles_known(r1, r2, float(np.linalg.norm(p2 - p1)))
         if known is not None:
             decided += 1
             assert known == bool(utils.rotated_rectangles_intersect(r1, r2))
@@ -226,7 +230,7 @@ def test_the_min_gap_is_the_reference_value():
             if v is not ego:
                 v.position = ego.position + rng.normal(0.0, 12.0, 2)
                 v.heading = float(rng.uniform(-np.pi, np.pi))
-        assert min_gap_on_road(road, ego, 40.0) == fast_road._min_gap_reference(road, ego, 40.0)
+        assert min_gap_on_road(road, ego, 40.0) == _min_gap_reference(road, ego, 40.0)
 
 
 def test_every_pair_highway_env_would_examine_for_a_collision_is_kept():
@@ -241,7 +245,7 @@ def test_every_pair_highway_env_would_examine_for_a_collision_is_kept():
             v.position = rng.uniform(-12.0, 12.0, 2)
             v.speed = float(rng.uniform(-5.0, 30.0))
         vehicles, members = road.vehicles, road.vehicles + road.objects
-        kept = fast_road._collision_candidates(vehicles, members, 0.1)
+        kept = _collision_candidates(vehicles, members, 0.1)
         assert kept == sorted(kept)
         examined = [(i, j) for i, v in enumerate(vehicles) for j in range(i + 1, len(members))
                     if not np.linalg.norm(members[j].position - v.position)
@@ -304,7 +308,7 @@ def test_the_neighbour_search_is_highway_envs():
             road.vehicles[-1].position = road.vehicles[0].position.copy()      # a tie
             queries = [(v, index) for v in road.vehicles for index in [None, *lanes]]
             expected = [Road.neighbour_vehicles(road, v, index) for v, index in queries]
-            window = fast_road._ActWindow(road, Landmark, own)            # lanes remember
+            window = _ActWindow(road, Landmark, own)            # lanes remember
             try:
                 for (v, index), plain in zip(queries, expected):
                     found = window.neighbours(v, index)
