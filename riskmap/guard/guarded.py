@@ -37,8 +37,6 @@ from riskmap.guard.events import nearest_neighbours
 from riskmap.guard.features import OBSERVED, SEGMENT_S
 from riskmap.registry import make_planner
 from riskmap.sim.plan import PLAN_DT_S, HumanDriver, Plan, drives_itself, traits_of
-from riskmap.sim.world import cap_ego_accel
-from riskmap.sim.world import history as world_history
 
 GUARD_CHECKPOINT = "checkpoints/guard_tgat"
 LOG = logging.getLogger("riskmap.guard")
@@ -114,7 +112,7 @@ class Guard:
         """The scene now with OBSERVED segments of history (from the recording when attached)."""
         if self.run is None:
             return fallback.past()
-        return world_history(self.run, SEGMENT_S * (OBSERVED - 1), SEGMENT_S, 80.0)
+        return self.run.history(SEGMENT_S * (OBSERVED - 1), SEGMENT_S, 80.0)
 
     def step(self, scene: Scene) -> str | None:
         """One decision: returns None, "single", "sustained" or "hard" (and logs interventions)."""
@@ -188,7 +186,7 @@ class GuardedPlanner:
     def attach(self, run) -> None:
         """Closed-loop hook: cap the ego's acceleration during slowdown frames."""
         self.guard.attach(run)
-        cap_ego_accel(run, self.guard.accel_cap)
+        run.cap_ego_accel(self.guard.accel_cap)
 
     def plan(self, scene: Scene) -> Plan:
         plan = self.planner.plan(scene)

@@ -14,7 +14,6 @@ from typing import Protocol
 import numpy as np
 
 from rasterize.scene import Scene
-from riskmap.sim.control import capped_accel
 
 
 class World(Protocol):
@@ -58,33 +57,6 @@ class World(Protocol):
     def history(self, history_s: float, dt_s: float, radius_m: float) -> Scene:
         """The scene now with `history_s` of everyone's past sampled every `dt_s`, others within
         `radius_m`, no lanes: what the guard's accident predictor scores."""
-
-
-def cap_ego_accel(world, cap: Callable[[], float | None]) -> None:
-    """`world.cap_ego_accel(cap)`. A stand-in world that predates the method (a test's, whose ego
-    only has `command`) gets the cap wrapped around its ego's `command` instead."""
-    if hasattr(world, "cap_ego_accel"):
-        world.cap_ego_accel(cap)
-        return
-    vehicle = world.ego
-    vehicle.command = capped_command(vehicle.command, cap)   # this vehicle object only
-
-
-def capped_command(command: Callable[[float, float], None], cap: Callable[[], float | None]):
-    """`command(accel, steer_ccw)` with the acceleration held at most `cap()` (None: as asked)."""
-
-    def capped(accel: float, steer_ccw: float) -> None:
-        command(capped_accel(accel, cap), steer_ccw)
-
-    return capped
-
-
-def history(world, history_s: float, dt_s: float, radius_m: float) -> Scene:
-    """`world.history(...)`. A stand-in world that predates the method (a test's) is read from
-    its `recorder`, as the highway-env worlds record."""
-    if hasattr(world, "history"):
-        return world.history(history_s, dt_s, radius_m)
-    return recorded_history(world.recorder, history_s, dt_s, radius_m)
 
 
 def recorded_history(recorder, history_s: float, dt_s: float, radius_m: float) -> Scene:

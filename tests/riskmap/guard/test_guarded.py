@@ -1,13 +1,14 @@
 import json
 from pathlib import Path
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
 from riskmap.guard.guarded import GuardConfig, GuardedPlanner, decelerated_waypoints, obstacle_ahead
 from riskmap.planner.baselines import ConstantVelocityPlanner
+from riskmap.sim.control import capped_accel
 from riskmap.sim.plan import Planner
+from riskmap.sim.world import recorded_history
 from tests.scenes import state
 
 REPO = Path(__file__).resolve().parents[3]
@@ -142,13 +143,16 @@ def test_registry_builds_guarded_specs_with_the_shipped_checkpoint():
 # -- the hard brake: a warning whose predicted time to contact is short ---------------------------
 
 class FakeVehicle:
-    """The closed-loop ego: records the (acceleration, steering) commands that reach it."""
+    """The closed-loop ego: records the (acceleration, steering) commands that reach it, held to
+    its world's cap as the real planned vehicle holds them."""
+
+    accel_cap = None
 
     def __init__(self):
         self.sent = []
 
     def command(self, accel, steer_ccw):
-        self.sent.append((accel, steer_ccw))
+        self.sent.append((capped_accel(accel, self.accel_cap), steer_ccw))
 
 
 class FakeRecorder:
@@ -161,9 +165,23 @@ class FakeRecorder:
         return self.current
 
 
+class FakeRun:
+    """A closed-loop world at time 0 (`riskmap.sim.world.World`'s guard methods only) whose
+    recording shows the scene given."""
+
+    def __init__(self, scene):
+        self.ego, self.time_s, self.setup, self.recorder = FakeVehicle(), 0.0, None, FakeRecorder(scene)
+
+    def cap_ego_accel(self, cap):
+        self.ego.accel_cap = cap
+
+    def history(self, history_s, dt_s, radius_m):
+        return recorded_history(self.recorder, history_s, dt_s, radius_m)
+
+
 def attached(planner, scene):
-    """`planner` attached to a fake closed-loop run (time 0) whose recording shows `scene`."""
-    run = SimpleNamespace(ego=FakeVehicle(), time_s=0.0, setup=None, recorder=FakeRecorder(scene))
+    """`planner` attached to a fake closed-loop run whose recording shows `scene`."""
+    run = FakeRun(scene)
     planner.attach(run)
     return run
 
