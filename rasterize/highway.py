@@ -425,7 +425,7 @@ class TrafficRecorder:
         lane_set = lanes_near(self.road.network, ego_xy, sampling) if lanes else ()
         return Scene(sel_states, sel_valid, sizes[agents], kinds[agents], ego_index=0,
                      current_index=n_hist, dt=dt_s, lanes=lane_set, source=source,
-                     time_s=step * self.dt_s, route_xy=self.route_at(step))
+                     time_s=step * self.dt_s, route_xy=self.route_at(step), agent_ids=agents)
 
     def route_at(self, step: int) -> np.ndarray | None:
         """The ego's route ahead (`route_ahead`) recorded at `step`, None if none was."""

@@ -129,6 +129,11 @@ class Scene:
     # Traffic lights at stop lines, with their state over the next seconds (recordings with
     # signals; empty elsewhere).
     signals: tuple[Signal, ...] = field(default_factory=tuple)
+    # The world's own id of each agent row [N] (int), the same for one vehicle in every scene of
+    # an episode (a recorder's agent id, a recording's obstacle id); None where the source keeps
+    # none. Planners that must follow agents across replans read it (a CommonRoad planner's
+    # obstacle ids, `riskmap.planner.commonroad_planner`); nothing else does.
+    agent_ids: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if self.route_xy is not None:
@@ -175,6 +180,11 @@ class Scene:
         object.__setattr__(self, "kinds", kinds)
         object.__setattr__(self, "lanes", tuple(self.lanes))
         object.__setattr__(self, "signals", tuple(self.signals))
+        if self.agent_ids is not None:
+            ids = np.asarray(self.agent_ids)
+            if ids.shape != (n,) or not np.issubdtype(ids.dtype, np.integer):
+                raise InputError(f"Scene.agent_ids must be integers [{n}], got {ids.dtype} {ids.shape}")
+            object.__setattr__(self, "agent_ids", ids.astype(np.int64))
 
     @property
     def num_agents(self) -> int:

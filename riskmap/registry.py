@@ -20,14 +20,20 @@ Your own planner, with no change to the toolkit:
                      from any module on the path or in the working directory; values are read
                      as int, finite float, true/false or text (URL-quoted where they hold `&`,
                      `=` or `?`)
+    cr:package.module:Factory[?predict=none|cv|toolkit&key=value&...]
+                     a CommonRoad planner (`plan(sc, pp, ref_path=None) -> Trajectory`,
+                     commonroad-io's `TrajectoryPlannerInterface`): `Factory(key=value, ...,
+                     seed=SEED)` as for `py:`, wrapped in
+                     `riskmap.planner.commonroad_planner.CommonRoadPlanner` with the obstacles'
+                     prediction `predict` (default cv), which is not passed to the factory
     NAME:ARG         entry `NAME` of the entry-point group `riskmap.planners` (an installed
                      package declares it), called as `factory(ARG, seed=SEED)`
 
-A `py:` SPEC may carry `name=NAME` among its keys: the planner's display name in tables, figure
+A `py:` or `cr:` SPEC may carry `name=NAME` among its keys: the planner's display name in tables, figure
 titles and summaries (letters, digits and `. _ + -`); it is not passed to the factory. Without
 one, a planner is shown by a short name made from its SPEC (`display_name`): `idm`, `cv`, ... as
 written, a checkpoint's file stem for `riskmap:`/`cnn:`/`cnn_lstm:`/`rvsg:`, the factory's name for
-`py:`, `NAME-<ARG's short name>` for a plug-in (`guard-riskmap_highway`); two planners of one run
+`py:` and `cr:`, `NAME-<ARG's short name>` for a plug-in (`guard-riskmap_highway`); two planners of one run
 that would share a name are told apart by `-2`, `-3`, ... (`display_names`). Records keep the
 whole SPEC beside the name.
 
@@ -44,10 +50,12 @@ from riskmap.sim.plan import HumanDriver, traits_of
 
 PLUGIN_GROUP = "riskmap.planners"
 SPECS = ("idm", "yielding", "cv", "replay", "riskmap:PATH", "cnn:PATH", "cnn_lstm:PATH", "rvsg:PATH",
-         "guard:SPEC", "guard-always:SPEC", "py:module:Factory[?key=value&...]")
+         "guard:SPEC", "guard-always:SPEC", "py:module:Factory[?key=value&...]",
+         "cr:module:Factory[?predict=none|cv|toolkit&key=value&...]")
 # The one help text of every command-line flag that takes a planner SPEC.
 SPEC_HELP = ("planner SPEC: idm, yielding, cv, replay (recordings), riskmap:PATH, cnn:PATH, "
-             "cnn_lstm:PATH, rvsg:PATH, guard:SPEC, your own py:package.module:Factory[?key=value&...] "
+             "cnn_lstm:PATH, rvsg:PATH, guard:SPEC, your own py:package.module:Factory[?key=value&...], "
+             "a CommonRoad planner cr:package.module:Factory[?predict=none|cv|toolkit&key=value&...] "
              "(the key name=NAME sets its name in tables and figures) or an installed plug-in NAME:ARG "
              "(README, \"Your own planner\")")
 # A display name goes into tables, figure titles and file names: one path component, no spaces.
@@ -55,6 +63,8 @@ NAME_PATTERN = r"[A-Za-z0-9][A-Za-z0-9._+-]{0,63}"
 NAME_KEY = "name"
 _CHECKPOINT_KINDS = ("riskmap", "cnn", "cnn_lstm", "cnn-lstm", "rvsg")
 _SIMPLE_KINDS = ("idm", "yielding", "cv", "replay")
+_KEYED_KINDS = ("py:", "cr:")         # SPECs with ?key=value&... (and so a name= key)
+PREDICT_KEY = "predict"               # cr: the obstacles' prediction, the adapter's, not the factory's
 
 
 def make_planner(spec: str, seed: int = 0, goal_variance: float | None = None):
@@ -87,6 +97,8 @@ def make_planner(spec: str, seed: int = 0, goal_variance: float | None = None):
     if kind == "py" and arg:
         factory, kwargs = _from_python(spec, arg, seed)
         return _made(spec, factory, **kwargs)
+    if kind == "cr" and arg:
+        return _commonroad_planner(spec, arg, seed)
     factory = _plugin(kind) if arg else None
     if factory is not None:
         return _made(spec, factory, arg, seed=seed)
@@ -100,7 +112,7 @@ def split_name(spec: str) -> tuple[str, str | None]:
     from urllib.parse import unquote_plus
 
     target, sep, query = spec.partition("?")
-    if not spec.startswith("py:") or not sep:
+    if not spec.startswith(_KEYED_KINDS) or not sep:
         return spec, None
     items = query.split("&")
     named = [item for item in items if unquote_plus(item.partition("=")[0]) == NAME_KEY]
@@ -139,7 +151,7 @@ def _default_name(spec: str) -> str:
         text = kind
     elif kind in _CHECKPOINT_KINDS:
         text = PurePath(arg).name.removesuffix(".safetensors")
-    elif kind == "py":
+    elif kind in ("py", "cr"):
         # the factory, dotted attributes and keys dropped: `...:GapKeeper?headway_s=2` -> GapKeeper
         text = arg.partition("?")[0].rpartition(":")[2].rpartition(".")[2]
     else:                               # a plug-in NAME:ARG; its ARG may itself be a SPEC
@@ -154,7 +166,7 @@ def _short_arg(arg: str) -> str:
     from pathlib import PurePath
 
     kind, sep, _ = arg.partition(":")
-    if kind in _SIMPLE_KINDS + _CHECKPOINT_KINDS + ("py",) or (sep and kind in _plugin_names()):
+    if kind in _SIMPLE_KINDS + _CHECKPOINT_KINDS + ("py", "cr") or (sep and kind in _plugin_names()):
         return display_name(arg)
     return PurePath(arg).name.removesuffix(".safetensors") if arg else ""
 
@@ -217,6 +229,38 @@ def _made(spec: str, factory, *args, **kwargs):
                          "factory must return an object with reset(scene) and plan(scene) -> Plan "
                          "(README, the planner contract)")
     return planner
+
+
+def _commonroad_planner(spec: str, arg: str, seed: int):
+    """`cr:package.module:Factory?predict=...&key=value&...`: the factory's planner, checked to
+    have `plan(sc, pp, ref_path)`, wrapped in `CommonRoadPlanner` (one line for what is wrong)."""
+    from riskmap.planner.commonroad_planner import PREDICTIONS, CommonRoadPlanner
+
+    target, _, query = arg.partition("?")
+    keys = _spec_keys(spec, query)
+    predict = keys.pop(PREDICT_KEY, "cv")
+    if predict not in PREDICTIONS:
+        raise InputError(f"planner {spec!r}: predict={predict!r}; use one of {', '.join(PREDICTIONS)}")
+    rest = "&".join(f"{k}={v}" for k, v in _raw_pairs(query) if k != PREDICT_KEY)
+    factory, kwargs = _from_python(spec, target + ("?" + rest if rest else ""), seed)
+    try:
+        inner = factory(**kwargs)
+    except InputError:
+        raise
+    except Exception as err:  # noqa: BLE001 - a user's factory may raise anything
+        raise InputError(f"planner {spec!r} could not be made ({type(err).__name__}: {err}); "
+                         "fix its factory or its keys") from None
+    if isinstance(inner, type) or not callable(getattr(inner, "plan", None)):
+        raise InputError(f"planner {spec!r} made a {type(inner).__name__}, which has no "
+                         "plan(sc, pp, ref_path=None) -> Trajectory; a cr: factory must return a "
+                         "CommonRoad planner (commonroad.planning.planner_interface."
+                         "TrajectoryPlannerInterface)")
+    return CommonRoadPlanner(inner, predict=predict)
+
+
+def _raw_pairs(query: str) -> list[tuple[str, str]]:
+    """The raw (key, value) pairs of a SPEC's query, URL-quoted as written."""
+    return [(item.partition("=")[0], item.partition("=")[2]) for item in query.split("&") if item]
 
 
 def _literal(text: str):

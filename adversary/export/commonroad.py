@@ -49,14 +49,15 @@ from pathlib import Path
 
 import numpy as np
 
+# highway-env scenes: lanelet id = LANELET_ID_OFFSET + lane index, straight lanes extended by
+# LANE_EXTENSION_M (`rasterize.commonroad.lanelets`, the one builder)
+from rasterize.commonroad.lanelets import LANE_EXTENSION_M, LANELET_ID_OFFSET
 from rasterize.errors import InputError
 
 FORMATS = ("commonroad",)
 DECIMALS = 8                    # decimal places written (commonroad-io's writer truncates there)
 OBSTACLE_ID_OFFSET = 1000       # highway-env scenes: obstacle id = this + log agent
-LANELET_ID_OFFSET = 1           # highway-env scenes: lanelet id = this + lane index
 GOAL_LENGTH_M = 10.0            # the goal rectangle along the route
-LANE_EXTENSION_M = 50.0         # highway-env lanes reach this far beyond every exported position
 AUTHOR = "riskmap toolkit (adversary export)"
 SIDECAR_VERSION = 1
 TRAJECTORY_COLUMNS = ("time_step", "x", "y", "orientation", "velocity", "yaw_rate")
@@ -307,56 +308,17 @@ def _recorded_scenario(run: AttackedRun) -> tuple:
     return scenario, ids, [types[i] for i in ids], tags, source
 
 
-def _straight(points: np.ndarray) -> bool:
-    if len(points) < 2 or np.linalg.norm(points[-1] - points[0]) < 1e-6:
-        return False
-    d = (points[-1] - points[0]) / np.linalg.norm(points[-1] - points[0])
-    off = (points - points[0]) @ np.array([-d[1], d[0]])
-    return bool(np.abs(off).max() < 1e-3)
-
-
 def _highway_lanelets(run: AttackedRun) -> list:
-    """Lanelets of a highway-env scene's stored lanes (module docstring)."""
-    from rasterize.commonroad_compat import Lanelet, LaneletType, LineMarking
+    """Lanelets of a highway-env scene's stored lanes over every exported position (module
+    docstring): the one builder, `rasterize.commonroad.lanelets`, which the CommonRoad planner
+    adapter shares."""
+    from rasterize.commonroad.lanelets import lanelets_from_lanes
 
-    markings = {0: LineMarking.NO_MARKING, 1: LineMarking.DASHED, 2: LineMarking.SOLID, 3: LineMarking.SOLID}
     lanes = run.record.window.lanes
     if not lanes:
         raise InputError(f"scene {run.record.scene.where} holds no lanes; nothing to build a road from")
     xy = run.states[:, run.t0_step:, :2][run.valid[:, run.t0_step:]]
-    bounds = []
-    for lane in lanes:
-        centre = np.asarray(lane.centre, dtype=np.float64)
-        if _straight(centre):
-            d = (centre[-1] - centre[0]) / np.linalg.norm(centre[-1] - centre[0])
-            left_normal = np.array([-d[1], d[0]])
-            s = (xy - centre[0]) @ d
-            lo = min(0.0, float(s.min()) - LANE_EXTENSION_M)
-            hi = max(float((centre[-1] - centre[0]) @ d), float(s.max()) + LANE_EXTENSION_M)
-            along = centre[0] + np.array([lo, hi])[:, None] * d
-            half = 0.5 * lane.width_m
-            bounds.append((along + half * left_normal, along, along - half * left_normal))
-        else:          # a curved lane: as stored
-            bounds.append((np.asarray(lane.left, dtype=np.float64), centre,
-                           np.asarray(lane.right, dtype=np.float64)))
-    lanelets = []
-    for i, ((left, centre, right), lane) in enumerate(zip(bounds, lanes)):
-        adj_left = adj_right = None
-        for j, (other_left, _, other_right) in enumerate(bounds):
-            if j == i or len(other_left) != len(left):
-                continue
-            if np.allclose(other_right, left, atol=0.05):
-                adj_left = LANELET_ID_OFFSET + j
-            if np.allclose(other_left, right, atol=0.05):
-                adj_right = LANELET_ID_OFFSET + j
-        lanelets.append(Lanelet(
-            left, centre, right, LANELET_ID_OFFSET + i,
-            adjacent_left=adj_left, adjacent_left_same_direction=True if adj_left else None,
-            adjacent_right=adj_right, adjacent_right_same_direction=True if adj_right else None,
-            line_marking_left_vertices=markings.get(int(lane.left_line), LineMarking.UNKNOWN),
-            line_marking_right_vertices=markings.get(int(lane.right_line), LineMarking.UNKNOWN),
-            lanelet_type={LaneletType.HIGHWAY}))
-    return lanelets
+    return lanelets_from_lanes(lanes, xy, LANE_EXTENSION_M, LANELET_ID_OFFSET)
 
 
 def _highway_scenario(run: AttackedRun) -> tuple:

@@ -166,7 +166,8 @@ def _ego_scene(traffic: RecordedTraffic, ego: int, track_t: list[float], track: 
                  traffic.sizes[agents], traffic.kinds[agents], ego_index=0,
                  current_index=config.history_steps, dt=config.dt_s, lanes=lanes,
                  source=f"commonroad:{traffic.name}", time_s=now_s, route_xy=route,
-                 signals=traffic.scene_signals(ego_state, now_s, config))
+                 signals=traffic.scene_signals(ego_state, now_s, config),
+                 agent_ids=np.asarray(traffic.ids, dtype=np.int64)[agents])
 
 
 class CommonRoadWorld:

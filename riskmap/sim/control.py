@@ -36,30 +36,50 @@ class ControllerConfig:
 class TrackingController:
     def __init__(self, config: ControllerConfig = ControllerConfig()):
         self.config = config
-        self.path = None          # [13, 2] world: plan origin then the waypoints
+        self.path = None          # [K + 1, 2] world: plan origin then the waypoints
         self._line = None         # the path as a Polyline
         self._integral = 0.0
+        self._braking = False
+        self._dt = PLAN_DT_S      # seconds between the plan's waypoints
+        self._knot0 = PLAN_DT_S / 2   # time (s) of the first speed of the profile
 
-    def set_plan(self, waypoints_ego: np.ndarray, origin: np.ndarray, heading: float) -> None:
+    def set_plan(self, waypoints_ego: np.ndarray, origin: np.ndarray, heading: float,
+                 dt_s: float = PLAN_DT_S, speeds: np.ndarray | None = None) -> None:
+        """Pin a plan made at `origin`/`heading`: waypoints `dt_s` apart (s), with the speed at
+        each (m/s) or None to take the speeds their spacing implies (`riskmap.sim.plan.Plan`)."""
         pts = np.concatenate([[[0.0, 0.0]], np.asarray(waypoints_ego, dtype=np.float64)])
         self.path = world_from_ego(pts, origin, heading)
         self._line = Polyline(self.path)
-        # Speed the plan implies over each 0.5 s interval.
-        self._speeds = self._line.lengths / 0.5
+        self._dt = float(dt_s)
+        self._braking = False
+        if speeds is None:
+            # Speed the plan implies over each interval, taken at the intervals' midpoints.
+            self._speeds = self._line.lengths / self._dt
+            self._knot0 = self._dt / 2
+        else:
+            # Speeds given at the waypoints' own times (dt, 2 dt, ...).
+            self._speeds = np.asarray(speeds, dtype=np.float64)
+            self._knot0 = self._dt
+
+    def brake(self) -> None:
+        """Stop on the spot: the planner had no plan (`riskmap.sim.plan.NoSolution`), so brake at
+        the hardest rate, wheels straight, until the next plan."""
+        self._braking = True
 
     def target_speed(self, since_plan_s: float) -> float:
-        """The plan's mean speed over the 0.5 s interval `since_plan_s` falls in."""
-        k = int(np.clip(since_plan_s // 0.5, 0, len(self._speeds) - 1))
+        """The plan's mean speed over the interval `since_plan_s` falls in."""
+        k = int(np.clip(since_plan_s // self._dt, 0, len(self._speeds) - 1))
         return float(self._speeds[k])
 
     def speed_profile(self, since_plan_s: float) -> tuple[float, float]:
-        """(speed m/s, acceleration m/s²) the plan asks for at `since_plan_s`: the interval means
-        taken at the intervals' midpoints and joined linearly (extended before the first)."""
-        mids = 0.25 + 0.5 * np.arange(len(self._speeds))
+        """(speed m/s, acceleration m/s²) the plan asks for at `since_plan_s`: the plan's speeds
+        at their times (the interval means at the intervals' midpoints, or the given speeds at the
+        waypoints' times) joined linearly (extended before the first)."""
+        mids = self._knot0 + self._dt * np.arange(len(self._speeds))
         if len(mids) < 2:
             return float(self._speeds[0]), 0.0
         k = int(np.clip(np.searchsorted(mids, since_plan_s) - 1, 0, len(mids) - 2))
-        slope = (self._speeds[k + 1] - self._speeds[k]) / 0.5
+        slope = (self._speeds[k + 1] - self._speeds[k]) / self._dt
         if since_plan_s > mids[-1]:
             return float(self._speeds[-1]), 0.0
         return float(self._speeds[k] + slope * (since_plan_s - mids[k])), float(slope)
@@ -78,6 +98,8 @@ class TrackingController:
                dt: float) -> tuple[float, float]:
         """(acceleration m/s², steering rad counter-clockwise) for the next control step."""
         cfg = self.config
+        if self._braking:
+            return max(cfg.accel_min_mps2, -speed / dt), 0.0      # to a stop, never into reverse
         if self.path is None:
             return cfg.accel_min_mps2, 0.0
         # Feed-forward the plan's own acceleration: feedback alone on the interval's mean speed

@@ -3,6 +3,13 @@
 Every planner that can drive the ego implements `reset(scene)` and `plan(scene) -> Plan`; the
 rollout (`riskmap.sim.rollout`) replans at 2 Hz and tracks the waypoints with a controller.
 `HumanDriver` marks the IDM/MOBIL ego, which drives itself (`drives_itself`) and makes no plan.
+
+A plan has two forms: the classic one, 12 waypoints 0.5 s apart (`Plan.dt_s` at its default,
+no `speeds`), which every learnt planner makes, and the timed one, any K >= 1 waypoints at any
+step `dt_s` >= MIN_PLAN_DT_S, optionally with the speed (m/s) at each waypoint, which a
+planner following another framework's trajectory type makes (a CommonRoad `Trajectory` at
+0.1 s, `riskmap.planner.commonroad_planner`). The controller tracks either at its own step.
+A planner with no plan now raises `NoSolution`: the loop counts it and brakes.
 """
 
 from __future__ import annotations
@@ -19,9 +26,25 @@ from rasterize.scene import Scene
 from rasterize.timebase import PLAN_DT_S, PLAN_STEPS  # noqa: F401  (re-exported: 12 waypoints, 0.5 s apart)
 
 
+# The shortest step between waypoints a plan may have (s): the control period (10 Hz), below
+# which the controller could not tell two waypoints apart in time.
+MIN_PLAN_DT_S = 0.1
+
+
+class NoSolution(Exception):
+    """Raised by `plan(scene)` when the planner has no plan for this scene (a search that found
+    no trajectory). The loop counts it (`ImplausiblePlans.no_solution`, the records'
+    `no_solution_plans`) and brakes to a stop until the next replan; it never hides it."""
+
+
 @dataclass
 class Plan:
     """waypoints [12, 2]: ego frame (x forward, y left), metres, at 0.5 s steps over 6 s.
+
+    Timed form (module docstring): waypoints [K, 2] at `dt_s` steps (s, >= MIN_PLAN_DT_S), where
+    the ego should be dt_s, 2 dt_s, ..., K dt_s from now; `speeds` [K] (m/s) the speed there, or
+    None to take the speeds the waypoints' spacing implies. The classic form is dt_s = 0.5 with
+    no speeds, and must then be exactly [12, 2].
 
     The intermediate products are there for figures; planners without them leave them None.
     risk_map, goal_map, svf [G, G]; policy [5, G, G]; timings_s: seconds per stage.
@@ -43,6 +66,13 @@ class Plan:
     timings_s: dict = field(default_factory=dict)
     risk_steps: np.ndarray | None = None
     svf_steps: np.ndarray | Callable[[], np.ndarray] | None = None
+    dt_s: float = PLAN_DT_S
+    speeds: np.ndarray | None = None
+
+    @property
+    def timed(self) -> bool:
+        """Whether the plan uses the timed form (its own step, or speeds)."""
+        return self.dt_s != PLAN_DT_S or self.speeds is not None
 
     def __getstate__(self) -> dict:
         """A pickled plan (sent to another process) carries its computed SVFs, not functions."""
@@ -150,10 +180,35 @@ def requires_log(planner) -> bool:
     return bool(traits_of(planner).requires_log)
 
 
+def shape_problem(plan: Plan) -> str | None:
+    """Why `plan` cannot be tracked at all (wrong shape, NaN/inf, a step under MIN_PLAN_DT_S,
+    speeds that do not match the waypoints), None if it can."""
+    waypoints = np.asarray(plan.waypoints, dtype=np.float64)
+    if not plan.timed:
+        if waypoints.shape != (PLAN_STEPS, 2):
+            return (f"Plan.waypoints has shape {waypoints.shape}; the contract is [12, 2] (6 s at "
+                    "0.5 s), or set Plan.dt_s / Plan.speeds for a timed plan")
+    else:
+        dt = float(plan.dt_s)
+        if not np.isfinite(dt) or dt < MIN_PLAN_DT_S - 1e-9:
+            return f"Plan.dt_s is {plan.dt_s!r}; a timed plan's step is at least {MIN_PLAN_DT_S} s"
+        if waypoints.ndim != 2 or waypoints.shape[1] != 2 or len(waypoints) < 1:
+            return f"Plan.waypoints has shape {waypoints.shape}; a timed plan is [K >= 1, 2]"
+        if plan.speeds is not None:
+            speeds = np.asarray(plan.speeds, dtype=np.float64)
+            if speeds.shape != (len(waypoints),) or not np.isfinite(speeds).all():
+                return (f"Plan.speeds has shape {speeds.shape} or non-finite values; expected "
+                        f"finite [{len(waypoints)}] (one m/s per waypoint)")
+    if not np.isfinite(waypoints).all():
+        return "Plan.waypoints holds NaN or inf; every waypoint must be finite"
+    return None
+
+
 def check_plan(plan: Plan, name: str) -> Plan:
-    if plan.waypoints.shape != (PLAN_STEPS, 2) or not np.isfinite(plan.waypoints).all():
-        raise InputError(f"planner {name} returned waypoints of shape {plan.waypoints.shape} or "
-                         "non-finite values; expected finite [12, 2]")
+    """`plan` if it can be tracked; InputError naming the planner and why not otherwise."""
+    problem = shape_problem(plan)
+    if problem is not None:
+        raise InputError(f"planner {name} returned a plan that cannot be tracked: {problem}")
     return plan
 
 

@@ -46,6 +46,10 @@ class EpisodeRecord:
     # and the first one's problems with the time it was made. 0 and None where nothing planned.
     implausible_plans: int = 0
     implausible_plan_first: str | None = None
+    # Replans at which the planner had no plan (`riskmap.sim.plan.NoSolution`, or an adapted
+    # planner's empty trajectory; the ego braked) and the first one's time and reason.
+    no_solution_plans: int = 0
+    no_solution_first: str | None = None
     extra: dict = field(default_factory=dict)   # command-specific fields, written flat
 
     def as_dict(self) -> dict:
@@ -69,13 +73,14 @@ class EpisodeRecord:
                  distance_m: float, speeds: list[float], gaps: list[float],
                  plan_times_s: list[float], extra: dict | None = None,
                  red_light_violations: int = 0, yield_events: int = 0, implausible_plans: int = 0,
-                 implausible_plan_first: str | None = None) -> EpisodeRecord:
+                 implausible_plan_first: str | None = None, no_solution_plans: int = 0,
+                 no_solution_first: str | None = None) -> EpisodeRecord:
         """The record from a loop's per-step speeds (m/s), gaps (m) and plan times (s). A count
-        (`red_light_violations`, `yield_events`, `implausible_plans`) may also come in `extra`; it
-        moves to its field."""
+        (`red_light_violations`, `yield_events`, `implausible_plans`, `no_solution_plans`) may also
+        come in `extra`; it moves to its field."""
         extra = dict(extra or {})
         counts = {"red_light_violations": red_light_violations, "yield_events": yield_events,
-                  "implausible_plans": implausible_plans}
+                  "implausible_plans": implausible_plans, "no_solution_plans": no_solution_plans}
         for name in COUNT_DEFAULTS:
             if name in extra:
                 value = extra.pop(name)
@@ -88,12 +93,14 @@ class EpisodeRecord:
                    min_gap_m=finite_or_none(min(gaps)) if gaps else None,
                    plan_calls=len(plan_times_s), **plan_ms_stats(plan_times_s),
                    **{name: int(value) for name, value in counts.items()},
-                   implausible_plan_first=implausible_plan_first, extra=extra)
+                   implausible_plan_first=implausible_plan_first, no_solution_first=no_solution_first,
+                   extra=extra)
 
 
 CORE_FIELDS = tuple(f.name for f in fields(EpisodeRecord) if f.name != "extra")
 # Counts that records written before they existed did not hold: read as their default (0).
-COUNT_DEFAULTS = {"red_light_violations": 0, "yield_events": 0, "implausible_plans": 0}
+COUNT_DEFAULTS = {"red_light_violations": 0, "yield_events": 0, "implausible_plans": 0,
+                  "no_solution_plans": 0}
 
 
 def finite_or_none(value: float | None) -> float | None:

@@ -10,7 +10,9 @@ Every plan is checked against the planner contract (`riskmap.sim.plan_checks`): 
 cannot be tracked (wrong shape, NaN/inf) stops the episode; an implausible one (km/h, world
 coordinates, impossible speeds, swapped axes) is driven as made and counted in
 `LoopRecord.implausible`, which goes into the episode record (`implausible_plans` and
-`implausible_plan_first`).
+`implausible_plan_first`). A plan is tracked at its own step (`Plan.dt_s`, with its `speeds` if it
+gives them). A planner with no plan (`NoSolution`) is counted there too (`no_solution_plans`,
+`no_solution_first`) and the ego brakes until the next replan.
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ from rasterize.frames import ego_pose
 from rasterize.timebase import CONTROL_HZ, HISTORY_S, REPLAN_HZ
 from riskmap.sim.control import ControllerConfig, TrackingController
 from riskmap.sim.episode import FAMILY_SETUPS, Episode
-from riskmap.sim.plan import check_plan, traits_of
+from riskmap.sim.plan import NoSolution, check_plan, traits_of
 from riskmap.sim.plan_checks import ImplausiblePlans
 from riskmap.sim.record import EpisodeRecord
 from riskmap.sim.yield_events import YieldEventCounter
@@ -127,14 +129,28 @@ class _Tracker:
         scene = world.scene(self.config.history_s)
         seen = scene if hooks.perceive is None else hooks.perceive(scene, k)
         started = time.perf_counter()
-        plan = check_plan(self.planner.plan(seen), type(self.planner).__name__)
+        try:
+            made = self.planner.plan(seen)
+        except NoSolution as why:
+            # Counted, never hidden: the ego brakes until a later replan finds a plan.
+            self.plan_times.append(time.perf_counter() - started)
+            self.implausible.add_no_solution(1, f"at {seen.time_s:.1f} s: {why or 'no trajectory'}")
+            self.controller.brake()
+            self.since_plan = 0.0
+            if hooks.on_plan is not None:
+                hooks.on_plan(world, scene, None, k)
+            return
+        plan = check_plan(made, type(self.planner).__name__)
         self.plan_times.append(time.perf_counter() - started)
         # Counted, not replaced: tracking it as before keeps every good planner's drive unchanged,
         # and the count tells that a run's numbers came from plans that break the contract.
         self.implausible.check(plan, seen)
         # The plan is pinned to where the ego really is, not where a degraded scene shows it.
         origin, heading = ego_pose(scene)
-        self.controller.set_plan(plan.waypoints, origin, heading)
+        if plan.timed:
+            self.controller.set_plan(plan.waypoints, origin, heading, plan.dt_s, plan.speeds)
+        else:
+            self.controller.set_plan(plan.waypoints, origin, heading)
         self.since_plan = 0.0
         if hooks.on_plan is not None:
             hooks.on_plan(world, scene, plan, k)
