@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from rasterize.frames import ego_from_world, heading_angle
-from riskmap.evaluation.evaluate import EvalConfig
+from riskmap.evaluation.sources import EnvSource
 from riskmap.registry import cached_planner
 from riskmap.sim.episode import cached_env
 from riskmap.sim.log_replay import HumanLog, LogReplayEpisode
@@ -25,8 +25,7 @@ def collision_side(out: Path, spec: str, episode: int) -> dict:
     from riskmap.sim.rollout import DriveConfig, drive_episode
 
     meta = json.loads((out / "run.json").read_text())["config"]
-    config = EvalConfig(meta["env_id"], (spec,), meta["episodes"], meta["seed"], meta["mode"],
-                        episode_s=meta["episode_s"])
+    config = EnvSource(meta["env_id"], meta["episodes"], meta["seed"], meta["mode"], episode_s=meta["episode_s"])
     log = HumanLog.load(out / "logs" / f"episode_{episode:06d}.npz")
     env = cached_env(config.env_id, config.control_hz)
     run = LogReplayEpisode(env, config.env_id, config.seed, episode, log, config.control_hz)

@@ -22,7 +22,7 @@ def _episode(task: tuple) -> dict:
     import torch
 
     import riskmap.planner.riskmap_planner as riskmap_planner
-    from riskmap.evaluation.evaluate_commonroad import _traffic
+    from riskmap.evaluation.sources import recorded_traffic
     from riskmap.planner import gap_keeping
     from riskmap.planner.riskmap_planner import RiskMapPlanner
     from riskmap.sim.commonroad_replay import ReplayConfig, replay_commonroad_episode
@@ -32,7 +32,7 @@ def _episode(task: tuple) -> dict:
     config = gap_keeping.GapKeepingConfig(headway_s=headway)
     riskmap_planner.keep_gap = lambda w, s, dt, **kw: gap_keeping.keep_gap(w, s, dt, config, **kw)
     planner = RiskMapPlanner.load(checkpoint, goal_variance=goal_variance)
-    record = replay_commonroad_episode(_traffic(Path(path)), vehicle, planner,
+    record = replay_commonroad_episode(recorded_traffic(Path(path)), vehicle, planner,
                                        config=ReplayConfig(goal="human"))
     return {"headway_s": headway, "vehicle": vehicle, "file": Path(path).name,
             "collided": bool(record["collided"]),

@@ -281,24 +281,19 @@ def natural_metrics(config: HardenConfig, r: int, out: Path, progress: bool) -> 
 
     spec = planner_spec(config, r)
     result: dict = {}
-    if config.natural_env:
-        from riskmap.evaluation.evaluate import EvalConfig, evaluate
+    if config.natural_env or config.natural_commonroad:
+        from riskmap.evaluation.evaluate import evaluate
+        from riskmap.evaluation.sources import EnvSource, RecordingSource
 
-        table = evaluate(EvalConfig(config.natural_env, (spec,), config.natural_episodes, seed=config.natural_seed,
-                                    mode="reactive"), out / "closed_loop", workers=config.workers, resume=True,
+        source = (EnvSource(config.natural_env, config.natural_episodes, seed=config.natural_seed, mode="reactive")
+                  if config.natural_env else
+                  RecordingSource(tuple(config.natural_commonroad), seed=config.natural_seed, mode="reactive"))
+        table = evaluate(source, (spec,), out / "closed_loop", workers=config.workers, resume=True,
                          progress=progress)["planners"][spec]
         result["closed_loop"] = {"episodes": table["episodes"], "collision_rate": table["collided_rate"],
                                  "collisions": round(table["collided_rate"] * table["episodes"]),
+                                 **({} if config.natural_env else {"at_fault": table["at_fault"]}),
                                  "distance_m": table["distance_m"]["mean"]}
-    elif config.natural_commonroad:
-        from riskmap.evaluation.evaluate_commonroad import evaluate_commonroad
-
-        table = evaluate_commonroad(list(config.natural_commonroad), (spec,), out / "closed_loop",
-                                    seed=config.natural_seed, resume=True, progress=progress,
-                                    workers=config.workers, mode="reactive")[spec]
-        result["closed_loop"] = {"episodes": table["episodes"], "collision_rate": table["collision_rate"],
-                                 "collisions": round(table["collision_rate"] * table["episodes"]),
-                                 "at_fault": table["at_fault"], "distance_m": table["distance_m"]["mean"]}
     ade_path = out / "ade.json"
     if ade_path.exists():
         result["open_loop"] = json.loads(ade_path.read_text())

@@ -14,16 +14,17 @@ from __future__ import annotations
 import re
 import time
 from collections import Counter
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 
 from rasterize.timebase import REPLAN_HZ
-from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, Plan
+from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, Plan, PlannerTraits
 from riskmap.sim.plan_checks import plan_problems
 
 FAMILY_ENVS = ("highway-v0", "merge-v0", "roundabout-v0", "intersection-v0")
 REPLAN_PERIOD_S = 1 / REPLAN_HZ   # the rollout replans at 2 Hz (0.5 s)
+_TRAITS = frozenset(f.name for f in fields(PlannerTraits))
 
 
 @dataclass(frozen=True)
@@ -70,6 +71,14 @@ class _Checking:
     def __init__(self, planner, findings: Findings, env_id: str):
         self.planner, self.findings, self.env_id = planner, findings, env_id
         self.scenes: list = []
+
+    def __getattr__(self, name: str):
+        # What the planner declares (`PlannerTraits`: `attach`, `route_settings`, ...) it declares
+        # through the wrapper too, so that it drives as in every other command: e.g. a `cr:`
+        # planner is given the world (`attach`) and so the recording's own lanelet network.
+        if name in _TRAITS:
+            return getattr(self.planner, name)
+        raise AttributeError(name)
 
     def reset(self, scene) -> None:
         try:

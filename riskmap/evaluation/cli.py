@@ -34,33 +34,29 @@ def _cmd_drive(args: argparse.Namespace) -> int:
 
 
 def _cmd_evaluate(args: argparse.Namespace) -> int:
-    from riskmap.evaluation.evaluate import EvalConfig, evaluate
+    from riskmap.evaluation.evaluate import evaluate
+    from riskmap.evaluation.sources import EnvSource, RecordingSource
 
     planners = tuple(p.strip() for p in args.planners.split(",") if p.strip())
     if not planners:
         raise InputError(f"--planners {args.planners!r} names no planner; give comma-separated "
                          "SPECs, e.g. idm,cv,riskmap:checkpoints/riskmap_highway")
     if args.commonroad:
-        from riskmap.evaluation.evaluate_commonroad import evaluate_commonroad
-
         if args.env or args.episodes:
             raise InputError("--commonroad evaluates recorded vehicles: drop --env and --episodes "
                              "(--max-episodes N evaluates N of them)")
-        evaluate_commonroad(args.commonroad, planners, Path(args.out), seed=args.seed,
-                            limit=args.max_episodes,
-                            resume=args.resume, progress=not args.quiet, workers=args.workers,
-                            goal=args.goal or "route", mode=args.mode,
-                            goal_variance=args.goal_variance, replan_hz=args.replan_hz)
-        print((Path(args.out) / "table.md").read_text(), end="")
-        return 0
-    if args.goal is not None or args.goal_variance is not None:
-        raise InputError("--goal and --goal-variance are for recordings (--commonroad); on simulated "
-                         "scenes the planner follows the route rule with its checkpoint's variance")
-    if not args.env or not args.episodes:
-        raise InputError("evaluate needs --env ENV and --episodes N (or --commonroad FILES)")
-    config = EvalConfig(env_id=args.env, planners=planners, episodes=args.episodes, seed=args.seed,
-                        mode=args.mode, episode_s=args.episode_s, replan_hz=args.replan_hz)
-    evaluate(config, Path(args.out), workers=args.workers, resume=args.resume,
+        source = RecordingSource(tuple(args.commonroad), seed=args.seed, goal=args.goal or "route",
+                                 mode=args.mode, goal_variance=args.goal_variance,
+                                 replan_hz=args.replan_hz, limit=args.max_episodes)
+    else:
+        if args.goal is not None or args.goal_variance is not None:
+            raise InputError("--goal and --goal-variance are for recordings (--commonroad); on simulated "
+                             "scenes the planner follows the route rule with its checkpoint's variance")
+        if not args.env or not args.episodes:
+            raise InputError("evaluate needs --env ENV and --episodes N (or --commonroad FILES)")
+        source = EnvSource(env_id=args.env, episodes=args.episodes, seed=args.seed, mode=args.mode,
+                           episode_s=args.episode_s, replan_hz=args.replan_hz)
+    evaluate(source, planners, Path(args.out), workers=args.workers, resume=args.resume,
              progress=not args.quiet)
     print((Path(args.out) / "table.md").read_text(), end="")
     return 0

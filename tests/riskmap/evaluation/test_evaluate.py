@@ -6,7 +6,8 @@ import pytest
 import riskmap.evaluation.evaluate as evaluate_module
 from rasterize.errors import InputError
 from riskmap.cli import main
-from riskmap.evaluation.evaluate import EvalConfig, evaluate
+from riskmap.evaluation.evaluate import evaluate
+from riskmap.evaluation.sources import EnvSource
 from riskmap.sim.episode import make_env
 from riskmap.sim.log_replay import HumanLog, LogReplayEpisode, ReplayPlanner, record_human_episode
 from riskmap.sim.rollout import DriveConfig, drive_episode
@@ -68,9 +69,9 @@ def test_replay_needs_a_log_and_log_mode():
     with pytest.raises(InputError, match="--mode log"):
         ReplayPlanner().plan(constant_velocity_scene())
     with pytest.raises(InputError, match="--mode log only"):
-        EvalConfig(ENV, ("idm", "replay"), 1, mode="reactive")
+        EnvSource(ENV, 1, mode="reactive").check(("idm", "replay"))
     with pytest.raises(InputError, match="once"):
-        EvalConfig(ENV, ("cv", "cv"), 1)
+        evaluate(EnvSource(ENV, 1), ("cv", "cv"), "never-written")
 
 
 @pytest.mark.slow
@@ -91,22 +92,21 @@ def test_evaluate_writes_tables_and_resumes_without_recomputing(tmp_path, monkey
 
     # Resuming finished work recomputes nothing; adding a planner computes only that planner.
     calls = []
-    real = evaluate_module.planner_task
+    real = evaluate_module.drive_task
 
-    def counting(config, out_dir, spec, episode):
-        calls.append((spec, episode))
-        return real(config, out_dir, spec, episode)
+    def counting(scenario, spec, out_dir):
+        calls.append((spec, scenario.episode))
+        return real(scenario, spec, out_dir)
 
-    monkeypatch.setattr(evaluate_module, "planner_task", counting)
-    monkeypatch.setattr(evaluate_module, "record_task", lambda *a: pytest.fail("re-recorded"))
-    config = EvalConfig(ENV, ("idm", "replay"), 2, seed=11, episode_s=2.0)
-    again = evaluate(config, out, resume=True, progress=False)["planners"]
+    monkeypatch.setattr(evaluate_module, "drive_task", counting)
+    monkeypatch.setattr(evaluate_module, "prepare_task", lambda *a: pytest.fail("re-recorded"))
+    source = EnvSource(ENV, 2, seed=11, episode_s=2.0)
+    again = evaluate(source, ("idm", "replay"), out, resume=True, progress=False)["planners"]
     assert calls == [] and again == results
-    evaluate(EvalConfig(ENV, ("idm", "replay", "cv"), 2, seed=11, episode_s=2.0), out, resume=True,
-             progress=False)
+    evaluate(source, ("idm", "replay", "cv"), out, resume=True, progress=False)
     assert calls == [("cv", 0), ("cv", 1)]
     with pytest.raises(InputError, match="other settings"):
-        evaluate(EvalConfig(ENV, ("idm",), 2, seed=12, episode_s=2.0), out, resume=True, progress=False)
+        evaluate(EnvSource(ENV, 2, seed=12, episode_s=2.0), ("idm",), out, resume=True, progress=False)
     log = HumanLog.load(out / "logs" / "episode_000000.npz")
     assert log.num_steps == 21 and log.dt_s == pytest.approx(0.1)
 
@@ -144,23 +144,23 @@ def test_replan_hz_sets_how_often_the_planner_plans(tmp_path, hz):
 
 def test_the_table_shows_display_names_and_the_records_keep_the_spec():
     named = "py:tests.broken_planners:Broken?fault=kmh&name=gk"
-    config = EvalConfig(ENV, ("idm", "riskmap:a/best", "riskmap:b/best", named), 1)
+    source, planners = EnvSource(ENV, 1), ("idm", "riskmap:a/best", "riskmap:b/best", named)
     row = {"collided": False, "off_road": False, "failure": None, "dangerous": 0, "encounters": 1,
            **{key: 1.0 for key in evaluate_module.METRICS}}
-    table = evaluate_module.summarise(config, [{**row, "planner": spec} for spec in config.planners])
-    assert list(table) == list(config.planners)                      # results.json: by SPEC
+    table = evaluate_module.summarise(source, planners, [{**row, "planner": spec} for spec in planners])
+    assert list(table) == list(planners)                             # results.json: by SPEC
     assert [entry["name"] for entry in table.values()] == ["idm", "best", "best-2", "gk"]
-    text = evaluate_module.markdown_table(config, table)
+    text = evaluate_module.markdown_table(source, table)
     assert "| gk | 1 |" in text and "| best-2 | 1 |" in text and "py:" not in text
     # episode folders stay named by the SPEC: --resume finds earlier runs' records there
     assert evaluate_module.planner_slug(named) == "py_tests_broken_planners_Broken_fault_kmh_name_gk"
     with pytest.raises(InputError, match="name='a/b'"):
-        EvalConfig(ENV, ("cv", "py:tests.broken_planners:Broken?name=a/b"), 1)
+        EnvSource(ENV, 1).check(("cv", "py:tests.broken_planners:Broken?name=a/b"))
 
 
 def test_replan_hz_must_divide_the_control_rate():
     with pytest.raises(InputError, match="--replan-hz 3: must divide the 10 Hz"):
-        EvalConfig(ENV, ("cv",), 1, replan_hz=3)
+        EnvSource(ENV, 1, replan_hz=3)
 
 
 @pytest.mark.slow
@@ -176,7 +176,7 @@ def test_implausible_plans_are_counted_per_run_and_named_under_the_table(tmp_pat
     assert results[kmh]["implausible_plan_first"].startswith("in episode 0 at 0.0 s: the first step implies")
     assert results["cv"]["implausible_plans"] == 0 and results["cv"]["implausible_plan_first"] is None
     rows = (out / "episodes.csv").read_text().splitlines()
-    assert rows[0].endswith(",plan_calls,implausible_plans") and rows[1].endswith(",4,0")
+    assert rows[0].endswith(",plan_calls,implausible_plans,no_solution_plans") and rows[1].endswith(",4,0,0")
     table = (out / "table.md").read_text()
     assert "Implausible plans" in table and "kmh: 4 plans in 1 of 1 episodes" in table and "km/h?" in table
     assert "cv:" not in table

@@ -8,10 +8,17 @@ import pytest
 import riskmap.sim.commonroad_replay as replay_module
 from rasterize.errors import InputError
 from riskmap.cli import main
-from riskmap.evaluation.evaluate_commonroad import evaluate_commonroad
+from riskmap.evaluation.evaluate import evaluate
+from riskmap.evaluation.sources import RecordingSource
 
 FIXTURES = Path(__file__).resolve().parents[2] / "fixtures" / "commonroad"
 pytestmark = pytest.mark.slow
+
+
+def evaluate_commonroad(recordings, planners, out, resume=False, progress=True, workers=1, **source):
+    """`riskmap evaluate --commonroad`: the one evaluate on a recordings source; {SPEC: summary}."""
+    return evaluate(RecordingSource(tuple(map(str, recordings)), **source), planners, out, workers=workers,
+                    resume=resume, progress=progress)["planners"]
 
 
 def test_replay_recovers_the_human_and_a_rerun_resumes(tmp_path, monkeypatch):
@@ -87,26 +94,29 @@ def test_cli_runs_recordings_in_reactive_mode(tmp_path, capsys):
 
 
 def test_red_light_violations_are_summed_beside_collisions_with_the_human_reference():
-    from riskmap.evaluation.evaluate_commonroad import markdown_table, summarise
+    from riskmap.evaluation.evaluate import markdown_table, summarise
+
+    source = RecordingSource((str(FIXTURES),))
 
     def record(violations, human, **kw):
-        base = {"collided": False, "off_road": False, "collision": None, "safety_pct": 0.0,
-                "ade_m": 1.0, "goal_error_m": 1.0, "distance_m": 10.0, "human_distance_m": 10.0,
-                "min_gap_m": 5.0, "red_light_violations": violations,
-                "human_red_light_violations": human}
+        base = {"planner": "cv", "collided": False, "off_road": False, "failure": None, "safety_pct": 0.0,
+                "dangerous": 0, "encounters": 1, "ade_m": 1.0, "goal_error_m": 1.0, "distance_m": 10.0,
+                "human_distance_m": 10.0, "min_gap_m": 5.0, "mean_speed_mps": 10.0,
+                "red_light_violations": violations, "human_red_light_violations": human}
         return {**base, **kw}
 
-    summary = summarise([record(2, 1), record(0, 1), record(1, 0)])
+    summary = summarise(source, ("cv",), [record(2, 1), record(0, 1), record(1, 0)])["cv"]
     assert (summary["red_light_violations"], summary["human_red_light_violations"],
             summary["red_light_violation_episodes"]) == (3, 2, 2)
-    assert "| 3 (2) |" in markdown_table({"cv": summary})
+    assert "| 3 (2) |" in markdown_table(source, {"cv": summary})
     old = record(0, 0)
     del old["red_light_violations"], old["human_red_light_violations"]   # written before the count
-    summary = summarise([record(1, 1), old])
-    assert summary["red_light_violations"] is None and "| n/a (n/a) |" in markdown_table({"cv": summary})
+    summary = summarise(source, ("cv",), [record(1, 1), old])["cv"]
+    assert summary["red_light_violations"] is None and "| n/a (n/a) |" in markdown_table(source, {"cv": summary})
     # rows by display name: checkpoints by stem (told apart), a py: plug-in by its name=
-    table = markdown_table({"riskmap:a/best": summary, "riskmap:b/best": summary,
-                            "py:riskmap_example_planner:GapKeeper?headway_s=2&name=gk2": summary})
+    specs = ("riskmap:a/best", "riskmap:b/best", "py:riskmap_example_planner:GapKeeper?headway_s=2&name=gk2")
+    table = markdown_table(source, summarise(source, specs, [{**record(0, 0), "planner": spec}
+                                                               for spec in specs for _ in range(2)]))
     assert "| best | 2 |" in table and "| best-2 | 2 |" in table and "| gk2 | 2 |" in table
     assert "riskmap:" not in table and "py:" not in table
 

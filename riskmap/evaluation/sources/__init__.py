@@ -1,0 +1,42 @@
+"""Scenario sources: where `riskmap evaluate`'s episodes come from.
+
+A `ScenarioSource` yields `Scenario`s; `riskmap.evaluation.evaluate.evaluate` drives every
+planner on every scenario of one source and writes one set of files whatever the source.
+A scenario says:
+
+- `id`: stable, it names the episode's record file (OUT/episodes/<planner>/<id>.json), so
+  `--resume` finds finished work by it; `label`: what the CSV's `episode` column shows;
+- `prepare(out)`: make the recorded log the planners are compared with, once (highway-env: drive
+  the IDM/MOBIL human and save it; a recording already is its log); `recorded_log(out)` reads it;
+- `drive(spec, out)`: one episode of planner SPEC, run by the existing world of the source
+  (`riskmap.sim.log_replay` / `riskmap.sim.episode`, `riskmap.sim.commonroad_replay`), returned as
+  the record to store; `row(spec, record)`: that record in the common per-episode layout.
+
+The source gives the run's settings (run.json, what may change on `--resume`), the route rule,
+checks the planners before any work and says which table columns apply to it (`applies`).
+
+Two sources: `EnvSource` (highway-env seeds: an env id, a seed and a number of episodes, traffic
+replaying the human's log or reacting) and `RecordingSource` (the recorded vehicles of CommonRoad
+files, `--mode`, `--goal`, `--max-episodes` drawn with the seed).
+
+A third, the stored attack scenes, would live in adversary (a higher layer: it may import this
+package, never the other way round), e.g. `adversary/crash/scene_source.py`: a frozen
+`AttackSceneSource(scenes_dir, seed, mode)` whose `scenarios()` are the stored `SceneRecord`s
+(`adversary.crash.scenes.load_record`) by file name; `prepared` true and `prepare` a no-op (the
+scene already holds its recorded `HumanLog`, highway-env or `adversary.crash.recorded`'s);
+`recorded_log` that log; `drive` the scene's existing closed loop without an attack
+(`riskmap.sim.log_replay.LogReplayEpisode` for highway-env scenes, `adversary.crash.recorded`'s
+`rollout_recorded` for recorded ones) and the record it returns; `row` that record with
+`episode` set to the scene's name; `applies` by family. `evaluate(AttackSceneSource(...),
+planners, out)` then writes the same results.json, episodes.csv and table.md as the other two.
+
+Implementations are frozen dataclasses: workers get them pickled, and results must not depend on
+which process ran a scenario.
+"""
+
+from riskmap.evaluation.sources.base import OPTIONAL_COLUMNS, Scenario, ScenarioSource, planner_label
+from riskmap.evaluation.sources.env import EnvScenario, EnvSource
+from riskmap.evaluation.sources.recordings import RecordedScenario, RecordingSource, recorded_traffic
+
+__all__ = ["OPTIONAL_COLUMNS", "EnvScenario", "EnvSource", "RecordedScenario", "RecordingSource", "Scenario",
+           "ScenarioSource", "planner_label", "recorded_traffic"]
