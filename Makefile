@@ -10,7 +10,7 @@ STAMP  := $(VENV)/.installed
 TORCH_PIN := torch==2.14.1 torchvision==0.29.1
 DEMO_OUT  ?= out/demo
 
-.PHONY: setup test test-faults test-cluster test-commonroad-oldest demo bench clean
+.PHONY: setup test test-faults test-cluster test-commonroad-oldest test-commonroad-idm demo bench clean
 
 setup: $(STAMP)
 
@@ -55,6 +55,19 @@ $(CR_OLDEST_DIR)/.installed: $(STAMP)
 
 test-commonroad-oldest: $(CR_OLDEST_DIR)/.installed
 	PYTHONPATH=$(CURDIR)/$(CR_OLDEST_DIR) COMMONROAD_IO_EXPECTED=$(CR_OLDEST) $(BIN)/python -m pytest -q $(CR_TESTS)
+
+# An outside CommonRoad planner as the ego (examples/commonroad_idm): commonroad-idm-planner needs
+# commonroad-io < 2025, so it and its pinned requirements go into their own --target folder, first
+# on PYTHONPATH, as for the oldest-commonroad tests above. Polygon3 builds from source (gcc).
+CR_IDM_DIR := $(VENV)/commonroad-idm
+
+$(CR_IDM_DIR)/.installed: $(STAMP) examples/commonroad_idm/requirements.txt
+	rm -rf $(CR_IDM_DIR)
+	$(BIN)/python -m pip install --quiet --no-deps --target $(CR_IDM_DIR) -r examples/commonroad_idm/requirements.txt
+	touch $@
+
+test-commonroad-idm: $(CR_IDM_DIR)/.installed
+	PYTHONPATH=$(CURDIR)/$(CR_IDM_DIR):$(CURDIR)/examples/commonroad_idm $(BIN)/python -m pytest -q tests/examples/test_commonroad_idm.py
 
 demo: $(STAMP)
 	$(BIN)/riskmap collect --env highway-v0 --episodes 2 --seed 2000 --out $(DEMO_OUT)/data/highway --workers 2 --resume

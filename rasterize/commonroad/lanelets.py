@@ -4,7 +4,9 @@ One builder for every place that shows a highway-env road to CommonRoad tools: t
 (`adversary.export.commonroad`) and the CommonRoad planner adapter
 (`riskmap.planner.commonroad_planner`). A straight lane is extended along its direction so that
 it covers every given position with `extension_m` to spare (highway-env's lanes are long, the
-toolkit's stored ones are cut to a scene's extent); a curved lane is kept as stored. Bounds are
+toolkit's stored ones are cut to a scene's extent), and with `cut` also cut to that stretch (the
+planner adapter: highway-env's straight lanes are 10 km long, and a planner that samples its
+reference path finely spends seconds on each); a curved lane is kept as stored. Bounds are
 the centre +- width / 2; two lanelets whose bounds coincide (within 5 cm) are adjacent, in the
 same direction. Ids: `id_offset` + the lane's index in the list given. Line markings come from
 the lanes' line types.
@@ -32,9 +34,11 @@ def is_straight(points: np.ndarray) -> bool:
     return bool(np.abs(off).max() < _STRAIGHT_ATOL_M)
 
 
-def lane_bounds(lanes, positions_xy: np.ndarray, extension_m: float = LANE_EXTENSION_M) -> list[tuple]:
+def lane_bounds(lanes, positions_xy: np.ndarray, extension_m: float = LANE_EXTENSION_M,
+                cut: bool = False) -> list[tuple]:
     """(left, centre, right) polylines [P, 2] (m) of each lane: straight ones extended over
-    `positions_xy` [M, 2] (module docstring), curved ones as stored."""
+    `positions_xy` [M, 2] (module docstring), curved ones as stored. `cut`: straight ones also
+    cut to that stretch (the positions' span + `extension_m` either side), however long the lane."""
     xy = np.asarray(positions_xy, dtype=np.float64).reshape(-1, 2)
     bounds = []
     for lane in lanes:
@@ -46,6 +50,8 @@ def lane_bounds(lanes, positions_xy: np.ndarray, extension_m: float = LANE_EXTEN
             lo = min(0.0, float(s.min()) - extension_m) if len(s) else 0.0
             end = float((centre[-1] - centre[0]) @ d)
             hi = max(end, float(s.max()) + extension_m) if len(s) else end
+            if cut and len(s):
+                lo, hi = float(s.min()) - extension_m, float(s.max()) + extension_m
             along = centre[0] + np.array([lo, hi])[:, None] * d
             half = 0.5 * lane.width_m
             bounds.append((along + half * left_normal, along, along - half * left_normal))
@@ -56,15 +62,15 @@ def lane_bounds(lanes, positions_xy: np.ndarray, extension_m: float = LANE_EXTEN
 
 
 def lanelets_from_lanes(lanes, positions_xy: np.ndarray, extension_m: float = LANE_EXTENSION_M,
-                        id_offset: int = LANELET_ID_OFFSET) -> list:
+                        id_offset: int = LANELET_ID_OFFSET, cut: bool = False) -> list:
     """CommonRoad `Lanelet`s of `lanes` (`rasterize.scene.Lane`), covering `positions_xy` [M, 2]
-    (module docstring)."""
+    (module docstring); `cut`: straight lanes cut to that stretch (`lane_bounds`)."""
     from rasterize.commonroad_compat import Lanelet, LaneletType, LineMarking
 
     markings = {0: LineMarking.NO_MARKING, 1: LineMarking.DASHED, 2: LineMarking.SOLID,
                 3: LineMarking.SOLID}
     lanes = list(lanes)
-    bounds = lane_bounds(lanes, positions_xy, extension_m)
+    bounds = lane_bounds(lanes, positions_xy, extension_m, cut)
     lanelets = []
     for i, ((left, centre, right), lane) in enumerate(zip(bounds, lanes)):
         adj_left = adj_right = None

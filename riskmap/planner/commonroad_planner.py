@@ -7,9 +7,12 @@ Trajectory` will do. At every replan `CommonRoadPlanner.plan(scene)` hands it
 
 - `sc`, a CommonRoad `Scenario` at STEP_S (0.1 s) steps of what the ego may see: the road's
   lanelet network with its ids (a CommonRoad recording's own network; on a highway-env road,
-  lanelets built once per episode from every lane of the road, `rasterize.commonroad.lanelets`,
-  ids 1 + the lane's index; without a world, e.g. `riskmap check-planner`'s repeat calls, from the
-  scene's lanes), and every other agent of the scene as a `DynamicObstacle` whose id stays the
+  lanelets of every lane of the road, `rasterize.commonroad.lanelets`, ids 1 + the lane's index
+  in the road, the same at every replan; its straight lanes, 10 km long in highway-env, cut at
+  every replan to the stretch the scene's agents, their next HORIZON_S at constant speed and the
+  route reach, + `lanelets.LANE_EXTENSION_M` either side, since a planner that samples its reference path
+  finely spends seconds on a 10 km lane; without a world, e.g. `riskmap check-planner`'s repeat
+  calls, from the scene's lanes), and every other agent of the scene as a `DynamicObstacle` whose id stays the
   same across replans (`Scene.agent_ids`: a recording's obstacle id, or OBSTACLE_ID_OFFSET + the
   highway-env recorder's agent id; a scene without ids numbers its rows after the largest id in
   use), typed as the recording types it, else by size (longer than TRUCK_LENGTH_M: truck), with
@@ -75,19 +78,21 @@ class CommonRoadPlanner:
         self.planner, self.predict = planner, predict
         self.world = None
         self.last_view: CommonRoadView | None = None   # for tests and figures
-        self._network = None
+        self._network = None     # a recording's own lanelet network
+        self._lanes = None       # or the lanes of a highway-env road
         self._types: dict[int, object] = {}
 
     # -- the contract ------------------------------------------------------------------------------
 
     def reset(self, scene: Scene) -> None:
-        self.world, self._network, self._types, self.last_view = None, None, {}, None
+        self.world, self._network, self._lanes, self._types, self.last_view = None, None, None, {}, None
 
     def attach(self, world) -> None:
-        """Keep the world: its road gives the lanelet network (once per episode), its recording
-        the obstacles' types, and it may give the planning problem (`planning_problem`)."""
+        """Keep the world: its road gives the lanelet network (a recording's, once per episode; a
+        highway-env road's lanes, cut at every replan), its recording the obstacles' types, and it
+        may give the planning problem (`planning_problem`)."""
         self.world = world
-        self._network, self._types = _world_network(world)
+        self._network, self._lanes, self._types = _world_network(world)
 
     def plan(self, scene: Scene) -> Plan:
         view = self.view(scene)
@@ -105,7 +110,10 @@ class CommonRoadPlanner:
         if network is None:
             from rasterize.commonroad.lanelets import lanelets_from_lanes
 
-            network = _network_of(lanelets_from_lanes(scene.lanes, scene.states[:, scene.current_index, :2]))
+            if self._lanes is not None:      # the road's lanes, cut to where the scene reaches
+                network = _network_of(lanelets_from_lanes(self._lanes, _reach_xy(scene), cut=True))
+            else:
+                network = _network_of(lanelets_from_lanes(scene.lanes, scene.states[:, scene.current_index, :2]))
         scenario = Scenario(STEP_S)
         scenario.add_objects(copy.deepcopy(network))     # the planner may annotate its copy
         row_ids = _row_ids(scene, self.world, network)
@@ -155,23 +163,31 @@ def _network_of(lanelets):
 
 
 def _world_network(world) -> tuple:
-    """(lanelet network, {obstacle id: ObstacleType}) of `world`: a recording's own network and
-    types; every lane of a highway-env road; (None, {}) for a world of neither kind."""
+    """(lanelet network, lanes, {obstacle id: ObstacleType}) of `world`: a recording's own
+    network and types; every lane of a highway-env road (its network is built at every replan,
+    `_reach_xy`); (None, None, {}) for a world of neither kind."""
     traffic = getattr(world, "traffic", None)
     scenario = getattr(traffic, "scenario", None)
     if scenario is not None:
         types = {int(o.obstacle_id): o.obstacle_type for o in scenario.dynamic_obstacles}
-        return copy.deepcopy(scenario.lanelet_network), types
+        return copy.deepcopy(scenario.lanelet_network), None, types
     recorder = getattr(world, "recorder", None)
     if recorder is None:
-        return None, {}
-    from rasterize.commonroad.lanelets import lanelets_from_lanes
+        return None, None, {}
     from rasterize.highway import LaneSampling, lanes_near
 
     ego_xy = np.asarray(world.ego_state()[:2], dtype=np.float64)
     # every lane of the road, whole, in the network's order: the same ids at every replan
-    lanes = lanes_near(recorder.road.network, ego_xy, LaneSampling(radius_m=1e6))
-    return _network_of(lanelets_from_lanes(lanes, ego_xy[None])), {}
+    return None, lanes_near(recorder.road.network, ego_xy, LaneSampling(radius_m=1e6)), {}
+
+
+def _reach_xy(scene: Scene) -> np.ndarray:
+    """[M, 2] world m: where the scene's agents are now and will be in HORIZON_S at constant
+    speed, and the route; a highway-env road's straight lanes are cut to this stretch."""
+    now = scene.states[scene.valid[:, scene.current_index], scene.current_index]
+    ahead = now[:, :2] + HORIZON_S * now[:, 4:5] * now[:, 2:4]
+    route = np.zeros((0, 2)) if scene.route_xy is None else np.asarray(scene.route_xy, dtype=np.float64)
+    return np.concatenate([now[:, :2], ahead, route.reshape(-1, 2)])
 
 
 def _row_ids(scene: Scene, world, network) -> dict:
