@@ -24,11 +24,14 @@ campaign config is read) and a category, which decides where the report shows it
 
 An attack module defines its `AttackEntry` (or several, `ENTRIES`) and imports only this module;
 `adversary.attacks.registry` imports the attack modules (one way) and answers every lookup by name.
-An entry either makes episode hooks (`factory`; the job drives its scene with them,
-`adversary.attacks.episode.drive_with_hooks`) or runs the whole job itself (`run_job`: CRASH on the
-recorded scene, a search then the replay of its most critical scenario). Jobs on a recorded
-scenario family (scenes cut from CommonRoad recordings, adversary.attacks.recorded) run through
-`run_recorded`; an attack without one runs on highway-env families only.
+An entry either makes episode hooks (`factory`) or runs the whole job itself (`run_job`: CRASH on
+the recorded scene, a search then the replay of its most critical scenario), and says which kinds
+of job scene it runs against (`scenes`): `HIGHWAY`, a highway-env seed's episode, and `RECORDED`,
+a scene cut from a CommonRoad recording (adversary.attacks.recorded). The job's scene source
+(adversary.attacks.job_source) runs the entry against the job's scene: `run_job` whatever the
+kind; hooks drive a highway-env episode, and on a recorded scene only a baseline's hooks, which
+perturb nothing, stand for the scene's unperturbed drive. By default an attack runs on highway-env
+families only.
 """
 
 from __future__ import annotations
@@ -38,6 +41,8 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 CATEGORIES = ("baseline", "rule", "selection", "search")
+# The kinds of job scene (adversary.attacks.job_source): a highway-env seed's episode, a recorded scene.
+HIGHWAY, RECORDED = "highway", "recorded"
 
 
 class Attack(Protocol):
@@ -61,13 +66,19 @@ class AttackEntry:
     summary: str                           # one line for the report
     factory: Callable[[Any, int], Attack] | None = None   # (params, seed) -> hooks for one episode
     run_job: JobRunner | None = None       # runs a whole job instead of hooks
-    # Runs a job on a recorded scenario family (adversary.attacks.recorded; the job's `scene` is
-    # a RecordedScene). None: the attack needs a highway-env world, and a campaign refuses it on
-    # recorded families.
-    run_recorded: JobRunner | None = None
+    # The kinds of job scene it runs against; a campaign refuses it on the families of any other
+    # (with RECORDED, the job's `scene` is a RecordedScene).
+    scenes: tuple[str, ...] = (HIGHWAY,)
 
     def __post_init__(self) -> None:
         if self.category not in CATEGORIES:
             raise ValueError(f"attack category {self.category!r} is not one of {CATEGORIES}")
         if (self.factory is None) == (self.run_job is None):
             raise ValueError(f"attack {self.name!r} needs exactly one of factory (episode hooks) or run_job")
+        if not self.scenes or set(self.scenes) - {HIGHWAY, RECORDED}:
+            raise ValueError(f"attack {self.name!r}: scenes {self.scenes} must name {HIGHWAY!r} and/or {RECORDED!r}")
+        # Hooks steer highway-env vehicles; a recorded scene has none, so there they can only
+        # stand for the unperturbed drive, which is what a baseline's hooks do.
+        if RECORDED in self.scenes and self.factory is not None and self.category != "baseline":
+            raise ValueError(f"attack {self.name!r}: episode hooks need a highway-env world; give it run_job "
+                             f"to run on {RECORDED} scenes")

@@ -41,7 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
-from adversary.attacks.base import AttackEntry
+from adversary.attacks.base import HIGHWAY, RECORDED, AttackEntry
 from adversary.attacks.episode import (
     GUARD_FIELDS,
     RecordingPlanner,
@@ -246,4 +246,4 @@ def crash_job(job) -> tuple[dict, bytes | None]:
 ENTRY = AttackEntry("crash", CrashAttackParams, "selection",
                     "CRASH: a selector picks the adversary in the recorded scene, the traffic model "
                     "generates its future against the planner (closed loop, replanned every k iterations)",
-                    run_job=crash_job, run_recorded=crash_job)
+                    run_job=crash_job, scenes=(HIGHWAY, RECORDED))

@@ -1,13 +1,13 @@
 """`natural`: the planner drives the unmodified episode of its seed (category baseline); on a
-recorded scenario family, the recorded scene with the ego handed to the planner at t0
-(adversary.attacks.recorded.natural_recorded_job)."""
+recorded scenario family, the recorded scene with the ego handed to the planner at t0 (its
+hooks perturb nothing, so the recorded job source drives the scene as it is:
+adversary.attacks.job_source)."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-from adversary.attacks.base import AttackEntry
-from adversary.attacks.recorded import natural_recorded_job
+from adversary.attacks.base import HIGHWAY, RECORDED, AttackEntry
 
 
 @dataclass(frozen=True)
@@ -28,4 +28,4 @@ class NaturalEpisode:
 ENTRY = AttackEntry("natural", NaturalParams, "baseline",
                     "the unmodified episode: highway-env's of the scene seed, or the recorded scene "
                     "with the ego handed to the planner at t0",
-                    factory=lambda params, seed: NaturalEpisode(), run_recorded=natural_recorded_job)
+                    factory=lambda params, seed: NaturalEpisode(), scenes=(HIGHWAY, RECORDED))

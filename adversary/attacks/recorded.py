@@ -8,9 +8,10 @@ cannot be attacked are skipped). Jobs on a recorded family carry their scene (`R
 and name the family by the env id `commonroad:<family>` (`recorded_env_id`), e.g.
 `commonroad:us101`, so that reports group by family and job ids stay readable.
 
-Only attacks whose entry has `run_recorded` (adversary.attacks.base) run on recorded families:
-`natural` (`natural_recorded_job` below) and `crash` (CRASH on the recorded scene). The others
-need a highway-env world and are refused when the campaign config is read.
+Only attacks whose entry names `RECORDED` among its `scenes` (adversary.attacks.base) run on
+recorded families: `natural` (`natural_recorded_job` below, run by the recorded job source,
+adversary.attacks.job_source) and `crash` (CRASH on the recorded scene). The others need a
+highway-env world and are refused when the campaign config is read.
 
 `natural` on a recorded scene: `adversary.crash.judge.rollout` with no generated tracks (the
 others replay the recording, the recorded ego is handed to the planner at t0 and driven for the

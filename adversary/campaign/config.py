@@ -35,6 +35,7 @@ from pathlib import Path
 
 import yaml
 
+from adversary.attacks.base import RECORDED
 from adversary.attacks.monitor import SafetyConfig
 from adversary.attacks.recorded import (
     RecordedScene,
@@ -216,7 +217,7 @@ def _validate_attack_envs(config: CampaignConfig, env_ids: list[str]) -> None:
         used = sorted(e for e in envs if attack.applies_to(e))
         require(bool(used), f"attacks[{i}] ({attack.name}) runs on no scenario family")
         recorded = [e for e in used if recorded_family_of(e)]
-        if recorded and attack_entry(attack.name).run_recorded is None:
+        if recorded and RECORDED not in attack_entry(attack.name).scenes:
             simulated = sorted(e for e in envs if not recorded_family_of(e))
             fix = (f"add envs: [{', '.join(simulated)}] to the attack" if simulated
                    else "remove the attack")

@@ -5,11 +5,11 @@ picklable arguments, so a process pool and Ray run exactly the same code. Result
 the job (fresh episode from its seed, planner state reset per episode), never on which worker or
 in which order jobs run, so a resumed or distributed campaign gives the same numbers.
 
-The attack's entry decides how the job runs (adversary.attacks.base): an attack with episode
-hooks drives the job's scene with them (`drive_with_hooks`); the others run the whole job
+The attack's entry runs against the job's scene, whatever its kind (adversary.attacks.job_source):
+an attack with episode hooks drives the job's scene with them; the others run the whole job
 themselves (search attacks: a seeded scenario search, then the replay of its most critical
 scenario; `crash`: CRASH on the job's recorded scene). A job of a recorded scenario family
-(`scene`: a RecordedScene, env id `commonroad:<family>`) runs through the entry's `run_recorded`.
+carries its scene (`scene`: a RecordedScene, env id `commonroad:<family>`).
 """
 
 from __future__ import annotations
@@ -21,11 +21,10 @@ import time
 import traceback
 from dataclasses import dataclass
 
-from adversary.attacks.episode import drive_with_hooks
+from adversary.attacks.job_source import run_entry
 from adversary.attacks.monitor import SafetyConfig
 from adversary.attacks.recorded import RecordedScene
 from adversary.attacks.registry import attack_entry
-from rasterize.errors import InputError
 from rasterize.timebase import CONTROL_HZ, REPLAN_HZ
 from riskmap.infra.config_mapping import to_plain
 
@@ -93,15 +92,7 @@ def run_job(job: Job) -> dict:
         import torch
 
         torch.set_num_threads(1)
-        entry = attack_entry(job.attack_name)
-        if job.scene is not None:
-            if entry.run_recorded is None:
-                raise InputError(f"attack {job.attack_name!r} needs a highway-env world; it cannot run "
-                                 f"on the recorded family {job.env_id}")
-            record, artifact = entry.run_recorded(job)
-        else:
-            record, artifact = (entry.run_job(job) if entry.run_job is not None
-                                else drive_with_hooks(job, entry.factory))
+        record, artifact = run_entry(attack_entry(job.attack_name), job)
         result = {"record": {**job.describe(), "status": "ok", "error": None, **record},
                   "artifact": artifact}
     except Exception as error:  # noqa: BLE001  (a failing job is recorded and the campaign goes on)

@@ -5,7 +5,9 @@ speed, yaw_rate; F = horizon / 0.5 s, t0 + 0.5 ... t0 + horizon) of window rows 
 ego, row 0). `splice_tracks` puts them into a copy of the human's 10 Hz log; `rollout` drives a
 planner (SPEC, `riskmap.registry`) in closed loop against the spliced log exactly as
 `riskmap evaluate --mode log` does (every other vehicle replays its record, the ego is handed to
-the planner at t = 0; `replay` plays the human back); `judge` computes STRIVE's metrics.
+the planner at t = 0; `replay` plays the human back; a scene cut from a recording hands it over
+at t0 on the recording's lanelets: each kind's source builds its world,
+`adversary.crash.scene_source`); `judge` computes STRIVE's metrics.
 
 The rollout ignores highway-env's own contact response for the ego (it would push the ego out of
 the other box and end the episode at the first touch): collisions are judged on box overlap
@@ -20,14 +22,14 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.interpolate import CubicHermiteSpline
 
+from adversary.crash.scene_source import scene_source
 from adversary.crash.scenes import CONTROL_HZ, WINDOW_DT_S, SceneRecord
 from riskmap.sim.alternatives import ego_only_solution
 from rasterize.errors import InputError
 from rasterize.frames import box_corners
 from rasterize.timebase import FUTURE_S, HISTORY_S, REPLAN_HZ
 from riskmap.registry import cached_planner
-from riskmap.sim.episode import cached_env
-from riskmap.sim.failures import CAR_LIMITS, HIGHWAY_ENV_LIMITS, classify_failure
+from riskmap.sim.failures import classify_failure
 from riskmap.sim.log_replay import HumanLog
 from riskmap.sim.metrics import (
     COLLISION_TYPES,
@@ -142,12 +144,6 @@ class Rollout:
         return np.array([self.recorder_id(int(a)) for a in record.agent_ids], dtype=np.int64)
 
 
-def _no_contact_response(run) -> None:
-    # highway-env would push the ego out of any box it touches and stop the episode; STRIVE
-    # judges overlap, so the ego passes through and the boxes are measured.
-    run.ego.collidable = False
-
-
 def with_ego_states(log: HumanLog, ego_states: np.ndarray) -> HumanLog:
     """A copy of `log` whose ego follows `ego_states` [S, 6] (the log's steps, from step 0; valid
     throughout): what log playback (`replay`) then drives."""
@@ -166,54 +162,32 @@ def rollout(record: SceneRecord, tracks: np.ndarray, rows, planner, planner_spec
             ego_states: np.ndarray | None = None, scene_steps: tuple[int, ...] = ()) -> Rollout:
     """Drive `planner` (made from `planner_spec`) against the log spliced with `tracks` at `rows`
     (module docstring). Empty `rows` (tracks [0, F, 6]) drives against the untouched record.
+    Every scene is driven one way, in the world its kind's source builds
+    (`adversary.crash.scene_source`): highway-env's log replay with the ego handed over at t = 0,
+    or a CommonRoad recording's lanelets with the ego handed over at t0.
     `keep_scene`: also keep the last step as a `Scene` with the whole drive as history, at the
-    control rate, lanes included (the campaign report's frames). A recorded scene
-    (`AttackScene.recording`) is driven on its CommonRoad recording instead, the ego handed over at
-    t0 (`adversary.crash.recorded.rollout_recorded`).
+    control rate, lanes included (the campaign report's frames).
 
     `ego_states` [S, 6] (the spliced log's steps): the ego follows these states instead of the
     human's record (with `planner` `replay`: a counterfactual ego, `adversary.harden.windows`).
     `scene_steps`: 10 Hz steps at which the drive is cut into training windows (2 s of history
     and 6 s of future at 2 Hz, as `riskmap collect` cuts them; times past the drive invalid),
     returned in `Rollout.scenes`."""
-    from riskmap.sim.log_replay import LogReplayEpisode
-    from riskmap.sim.plan import requires_log
-    from riskmap.sim.rollout import DriveConfig, DriveHooks, drive_episode
+    from riskmap.sim.rollout import drive_world
 
     started = time.perf_counter()
-    scene = record.scene
     if abs(1.0 / control_hz - record.log.dt_s) > 1e-9:
         raise InputError(f"control_hz={control_hz} differs from the record's {1 / record.log.dt_s:g} Hz")
     log = splice_tracks(record, tracks, rows)
     if ego_states is not None:
         log = with_ego_states(log, ego_states)
-    if scene.recording:              # a CommonRoad recording: its lanelets, ego handed over at t0
-        from adversary.crash.recorded import rollout_recorded
-
-        drove = rollout_recorded(record, log, planner, planner_spec, control_hz, replan_hz, keep_scene,
-                                 scene_steps)
-        return Rollout(**drove, wall_s=time.perf_counter() - started)
-    env = cached_env(scene.env_id, control_hz)
-    replay = requires_log(planner)
-    if replay:
-        planner.set_log(log)          # the ego's own record is never spliced
-    run = LogReplayEpisode(env, scene.env_id, scene.scene_seed, scene.episode, log, control_hz,
-                           replay_ego=replay, static_agents=scene.static_agents)
-    config = DriveConfig(scene.env_id, 1, scene.scene_seed, control_hz, replan_hz,
-                         episode_s=(log.num_steps - 1) * log.dt_s)
-    drive = drive_episode(env, planner, config, scene.episode, run=run,
-                          hooks=DriveHooks(on_ready=(_no_contact_response,)))
-    states, valid, sizes, _ = run.recorder.arrays()
-    states, valid = states.copy(), valid.copy()
-    ego = run.recorder.ego_id
-    final_scene = None
-    if keep_scene:
-        final_scene = run.recorder.scene(run.recorder.num_steps - 1, history_s=run.time_s,
-                                         future_s=0.0, dt_s=run.recorder.dt_s, source=scene.env_id)
-    windows = tuple(run.recorder.scene(k, WINDOW_HISTORY_S, WINDOW_FUTURE_S, WINDOW_DT_S, source=scene.env_id)
-                    for k in scene_steps)
-    return Rollout(states, valid, sizes.copy(), ego, run.log_ids(), log.dt_s,
-                   record.t0_step, planner_spec, drive, time.perf_counter() - started, final_scene, windows)
+    world = scene_source(record.scene).world(record, log, planner, planner_spec, control_hz, replan_hz)
+    drive = world.record(drive_world(world.run, world.driver, world.loop, world.hooks))
+    states, valid, sizes, ego, log_ids = world.arrays()
+    final_scene = world.final_scene() if keep_scene else None
+    windows = tuple(world.window(k) for k in scene_steps)
+    return Rollout(states, valid, sizes, ego, log_ids, log.dt_s, record.t0_step, planner_spec, drive,
+                   time.perf_counter() - started, final_scene, windows)
 
 
 def ego_track_2hz(result: Rollout, past_steps: int = 4, future_steps: int = 12) -> np.ndarray:
@@ -444,7 +418,7 @@ def judge(record: SceneRecord, tracks: np.ndarray, rows, adversary_row: int, pla
         metrics["failure"] = classify_failure(s, result.valid, result.sizes, ego, adv, k_coll, dt, attack=True,
                                               on_road=on_road, lane_width_m=lane_m,
                                               adversary_off_road=adv_frac > OFF_ROAD_FRACTION, from_step=k0,
-                                              limits=CAR_LIMITS if record.scene.recording else HIGHWAY_ENV_LIMITS)
+                                              limits=scene_source(record.scene).limits)
     elif k_any is not None and with_any is not None:       # the ego hit someone else: a failure too
         metrics["failure"] = classify_failure(result.states, result.valid, result.sizes, ego, int(with_any), k_any,
                                               dt, lane_width_m=lane_m, from_step=k0)

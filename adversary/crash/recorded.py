@@ -18,12 +18,8 @@ A scene is refused (InputError, the sweep skips it) when the ego is not recorded
 window [t0 - 2 s, t0 + horizon], when its recorded centre leaves the mapped lanes in it (the
 world's own lane check), or when no other vehicle is within 60 m at t0.
 
-`rollout_recorded` is `adversary.crash.judge.rollout` on such a scene: the others follow the
-spliced log by time (`log_traffic`), the ego is the human's record up to t0 and is handed over
-to the planner there (`AttackWorld`, a `CommonRoadWorld` that keeps driving through contacts:
-collisions are judged on box overlap afterwards). `replay` plays the ego's record back (its
-states are the log's); a planner that drives itself (the IDM/MOBIL `idm`) is the recordings'
-IDM/MOBIL (`RecordedRouteIdmPlanner`), as `riskmap evaluate --commonroad` drives it.
+`adversary.crash.judge.rollout` drives such a scene in the world its source builds
+(`adversary.crash.recorded_source`: the ego handed over at t0 on the recording's lanelets).
 """
 
 from __future__ import annotations
@@ -52,10 +48,9 @@ from rasterize.commonroad.reader import load_scenario
 from rasterize.commonroad.tracks import RecordedTraffic, SetBasedRecording
 from rasterize.errors import InputError
 from rasterize.frames import highway_env_from_world
-from rasterize.scene import Scene
-from rasterize.timebase import CONTROL_HZ, REPLAN_HZ
+from rasterize.timebase import CONTROL_HZ
 from riskmap.data.collect_commonroad import CommonRoadCollectConfig
-from riskmap.sim.commonroad_replay import CommonRoadWorld, ReplayConfig, road_from_lanelets
+from riskmap.sim.commonroad_replay import ReplayConfig, road_from_lanelets
 from riskmap.sim.log_replay import HumanLog
 from riskmap.sim.metrics import centre_off_lane
 
@@ -257,145 +252,5 @@ def sweep_scenes(files: list[Path], family: str, t0_after_s: float, start: int =
         yield index, path, ego_id, t0_s, record, why
 
 
-# ---- the closed loop --------------------------------------------------------------------------------
-
-class AttackWorld(CommonRoadWorld):
-    """`CommonRoadWorld` for attacks: a contact does not end the episode (STRIVE judges box
-    overlap over the whole horizon; the first contact is kept in `contact`), the road is built
-    once per process, and with `replay_track` ([S, 6] log states) the ego plays that record back
-    instead of driving; then leaving the lanes is noted but does not end the replay."""
-
-    def __init__(self, traffic: RecordedTraffic, ego_id: int, start_s: float, duration_s: float,
-                 config: ReplayConfig, scene_config: CommonRoadSceneConfig,
-                 replay_track: np.ndarray | None = None):
-        self.replay_track = replay_track
-        self.contact: dict | None = None
-        super().__init__(traffic, ego_id, start_s, duration_s, config, scene_config)
-        self.start_step = round(self.start / self.dt)
-
-    def _build_road(self):
-        from highway_env.road.road import Road
-
-        return Road(network=road_network(self.traffic.scenario.lanelet_network),
-                    np_random=np.random.RandomState(0), record_history=False)
-
-    @property
-    def done(self) -> bool:
-        if self.replay_track is not None:
-            return self.steps >= self.n_steps
-        return super().done
-
-    def _move_ego(self) -> np.ndarray:
-        if self.replay_track is None:
-            return super()._move_ego()
-        state = self.replay_track[self.start_step + self.steps + 1].copy()
-        self.vehicle.position = highway_env_from_world(state[:2])
-        self.vehicle.heading = float(-np.arctan2(state[3], state[2]))
-        self.vehicle.speed = float(state[4])
-        return state
-
-    def step(self) -> None:
-        super().step()
-        if self.crashed:
-            self.contact = self.contact or {**self.collision, "time_s": round(self.time_s, 3)}
-            self.crashed, self.collision = False, None
-            # CommonRoadWorld stops checking at a contact; the lane check still applies.
-            if centre_off_lane(self.road, self.vehicle, self.config.off_road_margin_m):
-                self.off_network = True
-
-
-class _LogPlayback:
-    """The ego plays its record back (`AttackWorld.replay_track`): no plans are made."""
-
-    drives_itself = True
-    name = "replay"
-
-    def reset(self, scene: Scene) -> None:
-        pass
-
-
-def _driver(planner, traffic: RecordedTraffic, ego_id: int):
-    """What drives the ego on a recording: log playback for a planner that needs the log, the
-    recordings' IDM/MOBIL for one that drives itself, else the planner."""
-    from riskmap.sim.plan import drives_itself, requires_log
-    from riskmap.sim.recorded_idm import RecordedRouteIdmPlanner
-
-    if requires_log(planner):
-        return _LogPlayback()
-    if drives_itself(planner):
-        return RecordedRouteIdmPlanner(traffic, ego_id)
-    return planner
-
-
-def _final_scene(traffic: RecordedTraffic, states: np.ndarray, valid: np.ndarray, ego: int,
-                 dt_s: float, source: str) -> Scene:
-    """The last step with the whole drive as history (as `TrafficRecorder.scene` cuts it)."""
-    k = states.shape[1] - 1
-    return _scene_at(traffic, states, valid, ego, dt_s, source, k, k, 0, 1, CommonRoadSceneConfig())
-
-
-def _scene_at(traffic: RecordedTraffic, states: np.ndarray, valid: np.ndarray, ego: int, dt_s: float,
-              source: str, k: int, history: int, future: int, stride: int, config: CommonRoadSceneConfig) -> Scene:
-    """The drive at step `k` with `history` and `future` steps of `stride` log steps around it
-    (times outside the drive invalid), as `TrafficRecorder.scene` cuts it; the route by `config`'s
-    rule."""
-    at_k = HumanLog(states, valid, traffic.sizes, traffic.kinds, ego, dt_s, False, False)
-    agents = window_rows(at_k, k, FINAL_SCENE_RADIUS_M, FINAL_SCENE_AGENTS)
-    state, others = states[ego, k], agents[1:]
-    lanes = lanes_from_lanelets(traffic.scenario.lanelet_network, state[:2], config.lane_radius_m)
-    route = traffic.route(ego, state, states[others, k], traffic.sizes[others, 0], k * dt_s, config)
-    times = k + stride * np.arange(-history, future + 1)
-    inside = (times >= 0) & (times < states.shape[1])
-    clipped = np.clip(times, 0, states.shape[1] - 1)
-    return Scene(states[agents][:, clipped], valid[agents][:, clipped] & inside, traffic.sizes[agents],
-                 traffic.kinds[agents], ego_index=0, current_index=history, dt=dt_s * stride, lanes=lanes,
-                 source=source, time_s=k * dt_s, route_xy=route)
-
-
-def rollout_recorded(record: SceneRecord, log: HumanLog, planner, planner_spec: str,
-                     control_hz: int = CONTROL_HZ, replan_hz: int = REPLAN_HZ, keep_scene: bool = False,
-                     scene_steps: tuple[int, ...] = ()) -> dict:
-    """`adversary.crash.judge.rollout` on a recorded scene, against `log` (the spliced record), as
-    the module docstring says: the fields of its `Rollout` but the wall time, with the highway
-    path's contract (recorder ids are log agents). `scene_steps`' windows are routed as `planner`
-    is (`route_scene_config`)."""
-    from riskmap.sim.commonroad_replay import route_scene_config
-    from riskmap.sim.record import EpisodeRecord
-    from riskmap.sim.rollout import LoopConfig, drive_world
-
-    scene = record.scene
-    if abs(log.dt_s * control_hz - 1.0) > 1e-9:
-        raise InputError(f"control_hz={control_hz} differs from the record's {1 / log.dt_s:g} Hz")
-    traffic = log_traffic(recording_traffic(scene.recording), log)
-    ego = log.ego_id
-    if traffic.index_of(scene.ego_id) != ego:
-        raise InputError(f"{scene.recording} no longer matches scene {scene.where}; record the scenes again")
-    driver = _driver(planner, traffic, scene.ego_id)
-    config = ReplayConfig(control_hz=control_hz, replan_hz=replan_hz, history_s=HISTORY_S)
-    world = AttackWorld(traffic, scene.ego_id, scene.t0_s, scene.horizon_s, config, route_scene_config(driver),
-                        replay_track=log.states[ego] if isinstance(driver, _LogPlayback) else None)
-    loop = drive_world(world, driver, LoopConfig(world.n_steps, control_hz // replan_hz, HISTORY_S,
-                                                 config.gap_radius_m))
-    _, driven = world.driven()
-    k0, end = record.t0_step, record.t0_step + len(driven) + 1
-    states, valid = log.states[:, :end].copy(), log.valid[:, :end].copy()
-    states[ego, k0 + 1:end] = driven
-    valid[ego, k0:end] = True
-    drive = EpisodeRecord.measured(
-        planner_spec, world.contact is not None, world.off_network, round(world.time_s - world.start, 3),
-        loop.distance_m, loop.speeds, loop.gaps, loop.plan_times_s,
-        extra={"recording": traffic.name, "ego_id": int(scene.ego_id), "start_s": round(world.start, 3),
-               "contact": world.contact, "driver": type(driver).__name__},
-        **loop.implausible.fields()).as_dict()
-    final_scene = _final_scene(traffic, states, valid, ego, log.dt_s, scene.env_id) if keep_scene else None
-    stride = round(WINDOW_DT_S / log.dt_s)
-    windows = tuple(_scene_at(traffic, states, valid, ego, log.dt_s, scene.env_id, k,
-                              round(HISTORY_S / WINDOW_DT_S), record.scene.future_steps, stride,
-                              route_scene_config(planner)) for k in scene_steps)
-    return {"states": states, "valid": valid, "sizes": log.sizes.copy(), "ego": ego,
-            "log_ids": np.arange(len(log.sizes), dtype=np.int64), "dt_s": log.dt_s, "t0_step": k0,
-            "planner_spec": planner_spec, "drive": drive, "final_scene": final_scene, "scenes": windows}
-
-
-__all__ = ["RECORDED_ENV", "AttackWorld", "candidates", "log_traffic", "record_recorded_scene", "recorded_log",
-           "recording_family", "recording_traffic", "rollout_recorded", "sweep_files", "sweep_scenes"]
+__all__ = ["RECORDED_ENV", "candidates", "log_traffic", "record_recorded_scene", "recorded_log",
+           "recording_family", "recording_traffic", "sweep_files", "sweep_scenes"]

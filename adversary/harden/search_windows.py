@@ -22,7 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from adversary.crash.judge import WINDOW_FUTURE_S, WINDOW_HISTORY_S, _no_contact_response, first_collision
+from adversary.crash.highway_source import _no_contact_response
+from adversary.crash.judge import WINDOW_FUTURE_S, WINDOW_HISTORY_S, first_collision
 from adversary.crash.scenes import CONTROL_HZ, WINDOW_DT_S
 from adversary.harden.windows import (
     NO_HISTORY,

@@ -52,6 +52,11 @@ class DriveConfig:
             object.__setattr__(self, "episode_s", FAMILY_SETUPS[family].episode_s)
         check_replan_hz(self.replan_hz, self.control_hz)
 
+    def loop(self) -> LoopConfig:
+        """How `drive_world` drives one of these episodes: episode_s at the control rate."""
+        return LoopConfig(round(self.episode_s * self.control_hz), self.control_hz // self.replan_hz,
+                          self.history_s, self.gap_radius_m)
+
 
 def check_replan_hz(replan_hz: int, control_hz: int) -> None:
     """A planner replans every control_hz / replan_hz control steps, a whole number: InputError
@@ -217,9 +222,12 @@ def drive_episode(env, planner, config: DriveConfig, episode: int, hooks: DriveH
     if run is None:
         run = Episode(env, config.env_id, config.seed, episode, config.control_hz,
                       setup=hooks.setup)
-    loop = LoopConfig(round(config.episode_s * config.control_hz),
-                      config.control_hz // config.replan_hz, config.history_s, config.gap_radius_m)
-    loop_record = drive_world(run, planner, loop, hooks)
+    return episode_record(run, planner, drive_world(run, planner, config.loop(), hooks), episode)
+
+
+def episode_record(run: Episode, planner, loop_record: LoopRecord, episode: int) -> dict:
+    """`drive_episode`'s record of `run` once `drive_world` drove it with `planner`: for callers
+    that run the loop on an `Episode` themselves, next to worlds of other kinds."""
     record = EpisodeRecord.measured(
         traits_of(planner).name if loop_record.drives_itself else type(planner).__name__, run.crashed, run.off_network,
         round(run.time_s, 3), loop_record.distance_m, loop_record.speeds, loop_record.gaps,

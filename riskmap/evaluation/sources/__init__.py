@@ -20,13 +20,13 @@ replaying the human's log or reacting) and `RecordingSource` (the recorded vehic
 files, `--mode`, `--goal`, `--max-episodes` drawn with the seed).
 
 A third, the stored attack scenes, would live in adversary (a higher layer: it may import this
-package, never the other way round), e.g. `adversary/crash/scene_source.py`: a frozen
-`AttackSceneSource(scenes_dir, seed, mode)` whose `scenarios()` are the stored `SceneRecord`s
-(`adversary.crash.scenes.load_record`) by file name; `prepared` true and `prepare` a no-op (the
-scene already holds its recorded `HumanLog`, highway-env or `adversary.crash.recorded`'s);
-`recorded_log` that log; `drive` the scene's existing closed loop without an attack
-(`riskmap.sim.log_replay.LogReplayEpisode` for highway-env scenes, `adversary.crash.recorded`'s
-`rollout_recorded` for recorded ones) and the record it returns; `row` that record with
+package, never the other way round): a frozen `AttackSceneSource(scenes_dir, seed, mode)`
+whose `scenarios()` are the stored `SceneRecord`s (`adversary.crash.scenes.load_record`) by file
+name; `prepared` true and `prepare` a no-op (the scene already holds its recorded `HumanLog`,
+highway-env or `adversary.crash.recorded`'s); `recorded_log` that log; `drive` the scene's closed
+loop without an attack, through the world its kind builds (`adversary.crash.scene_source`:
+`HighwaySource`, `RecordedSource`, the ones `judge.rollout` already uses) and the
+record it returns; `row` that record with
 `episode` set to the scene's name; `applies` by family. `evaluate(AttackSceneSource(...),
 planners, out)` then writes the same results.json, episodes.csv and table.md as the other two.
 

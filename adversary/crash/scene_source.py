@@ -1,0 +1,67 @@
+"""A stored attack scene's kind as a source: what builds the world its rollout drives.
+
+`adversary.crash.judge.rollout` drives every scene one way: it splices the generated tracks into
+the scene's log, asks the scene's source for the world (`SceneSource.world`), runs the one closed
+loop (`riskmap.sim.rollout.drive_world`) on it and reads the drive back from that world. What
+differs between the kinds lives in their source:
+
+- `HighwaySource` (adversary.crash.highway_source): highway-env scenes. `LogReplayEpisode`
+  replays the spliced log; the planner takes the ego at t = 0 and drives the whole log; the
+  drive's record is `riskmap.sim.rollout.drive_episode`'s.
+- `RecordedSource` (adversary.crash.recorded_source): scenes cut from CommonRoad recordings. The
+  CommonRoad world replays the spliced log on the recording's lanelets; the ego is the human's
+  record up to t0 and handed over there; the record names the planner by its SPEC.
+
+This is riskmap's scenario-source idea (riskmap.evaluation.sources) for attack scenes: the kind
+of scene, not a flag tested by the judge, decides how it is driven. Sources hold no state (one
+per kind), so workers may build them anywhere; a `SceneWorld` serves one drive.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol
+
+import numpy as np
+
+from adversary.crash.scenes import AttackScene, SceneRecord
+from riskmap.sim.log_replay import HumanLog
+
+
+class SceneWorld(Protocol):
+    """One drive of a scene: the world, what drives its ego, and how; then what it recorded."""
+
+    run: object            # the riskmap.sim.world.World that drive_world steps
+    driver: object         # what drives the ego there: the planner, or what stands in for it
+    loop: object           # riskmap.sim.rollout.LoopConfig
+    hooks: object          # riskmap.sim.rollout.DriveHooks
+
+    def record(self, loop_record) -> dict:
+        """The drive's record (`Rollout.drive`) from drive_world's `LoopRecord`."""
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, np.ndarray]:
+        """(states [A, S, 6], valid [A, S], sizes [A, 2], ego, log_ids [A]) as `Rollout` holds them."""
+
+    def final_scene(self):
+        """The last step with the whole drive as history, at the control rate (`keep_scene`)."""
+
+    def window(self, step: int):
+        """The training window cut at 10 Hz step `step` (`rollout`'s scene_steps)."""
+
+
+class SceneSource(Protocol):
+    limits: object         # riskmap.sim.failures limits the failure classifier holds the ego to
+
+    def world(self, record: SceneRecord, log: HumanLog, planner, planner_spec: str, control_hz: int,
+              replan_hz: int) -> SceneWorld:
+        """The world in which `planner` drives against `log` (the scene's spliced log)."""
+
+
+def scene_source(scene: AttackScene) -> SceneSource:
+    """The source of `scene`'s kind: a scene cut from a recording names it (`scene.recording`)."""
+    if scene.recording:
+        from adversary.crash.recorded_source import RECORDED_SOURCE
+
+        return RECORDED_SOURCE
+    from adversary.crash.highway_source import HIGHWAY_SOURCE
+
+    return HIGHWAY_SOURCE
