@@ -59,6 +59,45 @@ class TimeGapConfig:
         return self.weight * shadow
 
 
+@dataclass(frozen=True)
+class ReachConfig:
+    """A planning-time bound on how far along x the ego can be at step t from its speed now v0:
+    cells whose forward offset from the ego's cell lies outside [lo_t − tol, hi_t + tol] cost
+    `weight` at step t, where hi_t = v0 t + ½ accel t² and lo_t = v0 t − ½ decel t² (v0²/2 decel
+    once stopped), t in seconds, tol = `tolerance_cells` × the row length. The space-time actions
+    move 0 … max_forward cells per step whatever the speed, so without it a plan may put the ego
+    several cells ahead of where its speed can take it within 0.5 s (an implausible first step)
+    and its timing is the map's, not the car's. Off (weight 0) unless a checkpoint's sidecar
+    `planning.reach` names it (measured in experiments/README.md)."""
+
+    accel_mps2: float = 2.0
+    decel_mps2: float = 6.0
+    tolerance_cells: float = 1.0
+    weight: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not (0.0 < self.accel_mps2 <= 20.0 and 0.0 < self.decel_mps2 <= 20.0
+                and 0.0 <= self.tolerance_cells <= 10.0 and 0.0 <= self.weight < float("inf")):
+            raise InputError(f"planning reach {self}: accel_mps2 and decel_mps2 must be in (0, 20] "
+                             "m/s², tolerance_cells in [0, 10] and weight >= 0; fix the sidecar's "
+                             "planning.reach")
+
+    def penalty(self, speed_mps: float, grid: GridConfig, steps: int, step_s: float) -> np.ndarray:
+        """[T, G, G] to subtract from r_1 … r_T."""
+        from rasterize.frames import cell_centres_ego
+
+        x = cell_centres_ego(grid)[..., 0]                        # [G, G] metres ahead of the ego
+        x = x - x[start_cell(grid)]
+        t = step_s * np.arange(1, steps + 1)[:, None, None]
+        v0 = max(float(speed_mps), 0.0)
+        hi = v0 * t + 0.5 * self.accel_mps2 * t ** 2
+        lo = np.where(t < v0 / self.decel_mps2, v0 * t - 0.5 * self.decel_mps2 * t ** 2,
+                      v0 ** 2 / (2.0 * self.decel_mps2))
+        tol = self.tolerance_cells * grid.extent.length_m / grid.rows
+        outside = (x[None] > hi + tol) | (x[None] < lo - tol)
+        return self.weight * outside.astype(np.float32)
+
+
 class SpaceTimePlanner:
     """`reset(scene)`, `plan(scene) -> Plan`; the plan's `risk_map` is r_1 (the map in force
     now), `risk_steps` all T maps, `svf_steps` the visitation per step (computed when read)."""
@@ -75,6 +114,7 @@ class SpaceTimePlanner:
         self.sampler, self.seed = sampler, seed
         self.route_settings: dict | None = None   # route rule of recorded training data, if any
         self.time_gap = TimeGapConfig()            # off; see TimeGapConfig
+        self.reach = ReachConfig()                 # off; see ReachConfig
         # Planning-time pull towards the route rule's goal added to the learned goal map:
         # g + route_goal_weight · (−d² / 2σ²), d in cells from the route goal, σ² the goal
         # variance (0: the learned goal alone). The sidecar's `planning.route_goal_weight`.
@@ -117,6 +157,13 @@ class SpaceTimePlanner:
                 raise InputError(f"the sidecar's planning.time_gap {settings!r} is not a mapping of "
                                  "time_gap_s, weight; fix or remove it")
             planner.time_gap = TimeGapConfig(**settings)
+        settings = side.get("planning", {}).get("reach")
+        if settings is not None:
+            if not isinstance(settings, dict) or set(settings) - {"accel_mps2", "decel_mps2", "tolerance_cells",
+                                                                  "weight"}:
+                raise InputError(f"the sidecar's planning.reach {settings!r} is not a mapping of accel_mps2, "
+                                 "decel_mps2, tolerance_cells, weight; fix or remove it")
+            planner.reach = ReachConfig(**settings)
         return planner
 
     def reset(self, scene: Scene) -> None:
@@ -147,6 +194,9 @@ class SpaceTimePlanner:
             if self.time_gap.weight > 0:
                 now = quantised(uncertainty_map(scene, self.grid, self.sigma_x, self.sigma_y))
                 penalty = self.time_gap.penalty(now.astype(np.float32) / 255.0, evidence[:, 0], st.step_s)
+                reward = reward - torch.from_numpy(penalty)[None]
+            if self.reach.weight > 0:
+                penalty = self.reach.penalty(scene.ego_state()[4], self.grid, st.steps, st.step_s)
                 reward = reward - torch.from_numpy(penalty)[None]
             _, policy = spacetime_value_iteration(reward, g, st.max_forward, st.max_across)
             t["vi"] = time.perf_counter() - t0

@@ -154,3 +154,27 @@ def test_the_time_gap_prices_where_an_agent_was_up_to_the_gap_before():
     np.testing.assert_array_equal(TimeGapConfig(0.0, 3.0).penalty(now, predicted, 0.5), 3 * predicted)
     with pytest.raises(InputError, match="time_gap"):
         TimeGapConfig(time_gap_s=-1.0, weight=1.0)
+
+
+def test_the_reach_envelope_prices_exactly_the_cells_the_speed_cannot_reach():
+    """ReachConfig against the kinematics written out: at step t the ego is between
+    v0 t − ½ b t² (v0²/2b once stopped) and v0 t + ½ a t² ahead, give or take one row."""
+    from rasterize.config import FAMILY_EXTENTS, GridConfig
+    from rasterize.frames import cell_centres_ego
+    from rasterize.maps import start_cell
+    from riskmap.planner.st_planner import ReachConfig
+
+    grid = GridConfig(FAMILY_EXTENTS["highway"], 50, 50)
+    reach = ReachConfig(accel_mps2=2.0, decel_mps2=6.0, tolerance_cells=1.0, weight=7.0)
+    row_m = grid.extent.length_m / grid.rows
+    x = cell_centres_ego(grid)[..., 0] - cell_centres_ego(grid)[..., 0][start_cell(grid)]
+    for v0 in (0.0, 5.0, 25.0):
+        penalty = reach.penalty(v0, grid, 12, 0.5)
+        assert penalty.shape == (12, 50, 50) and set(np.unique(penalty)) <= {0.0, 7.0}
+        for k in range(12):
+            t = 0.5 * (k + 1)
+            hi = v0 * t + t * t
+            lo = v0 * t - 3.0 * t * t if t < v0 / 6.0 else v0 * v0 / 12.0
+            expected = ((x > hi + row_m) | (x < lo - row_m)) * 7.0
+            np.testing.assert_array_equal(penalty[k], expected)
+    assert not ReachConfig().penalty(5.0, grid, 12, 0.5).any()        # weight 0: off

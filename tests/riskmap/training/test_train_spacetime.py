@@ -89,10 +89,12 @@ def test_planning_settings_come_from_the_sidecar_and_bad_ones_are_named(st_check
     side = json.loads(st_checkpoint.with_suffix(".json").read_text())
     copy = tmp_path / "ck"
     shutil.copy(st_checkpoint.with_suffix(".safetensors"), copy.with_suffix(".safetensors"))
-    side["planning"] = {"route_goal_weight": 0.5, "time_gap": {"time_gap_s": 1.0, "weight": 20.0}}
+    side["planning"] = {"route_goal_weight": 0.5, "time_gap": {"time_gap_s": 1.0, "weight": 20.0},
+                        "reach": {"accel_mps2": 3.0, "weight": 50.0}}
     copy.with_suffix(".json").write_text(json.dumps(side))
     planner = load_planner(copy)
     assert planner.route_goal_weight == 0.5 and planner.time_gap.weight == 20.0
+    assert planner.reach.weight == 50.0 and planner.reach.accel_mps2 == 3.0 and planner.reach.decel_mps2 == 6.0
     assert load_planner(copy, goal_variance=0.25).route_goal_weight == 0.5   # the sidecar's kept
 
 
@@ -117,7 +119,8 @@ def test_bad_planning_settings_are_named(st_checkpoint, tmp_path):
     side = json.loads(st_checkpoint.with_suffix(".json").read_text())
     copy = tmp_path / "ck"
     shutil.copy(st_checkpoint.with_suffix(".safetensors"), copy.with_suffix(".safetensors"))
-    for bad in ({"route_goal_weight": -1}, {"time_gap": {"gap": 1}}):
+    for bad in ({"route_goal_weight": -1}, {"time_gap": {"gap": 1}}, {"reach": {"speed": 1}},
+                {"reach": {"accel_mps2": 0.0, "weight": 1.0}}):
         side["planning"] = bad
         copy.with_suffix(".json").write_text(json.dumps(side))
         with pytest.raises(InputError, match="planning"):
