@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import argparse
 
-from riskmap.infra.cli import run_command
+from riskmap.infra.cli import command_parser, run_command
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -20,7 +20,7 @@ def build_parser() -> argparse.ArgumentParser:
     from adversary.report import cli as report_cli
     from adversary.search import cli as search_cli
 
-    parser = argparse.ArgumentParser(prog="adversary", description=__doc__.splitlines()[0])
+    parser = command_parser("adversary", __doc__)
     subparsers = parser.add_subparsers(dest="command", required=True)
     for module in (campaign_cli, report_cli, search_cli, crash_cli, guard_data_cli, harden_cli,
                    export_cli):

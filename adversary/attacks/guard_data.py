@@ -9,6 +9,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from riskmap.infra.cli import QUIET_HELP
+
 
 def _run_guard_data(args: argparse.Namespace) -> int:
     from adversary.crash.guard_data import GuardDataConfig, export
@@ -59,6 +61,7 @@ def add_parsers(subparsers) -> None:
     p.add_argument("--cut", default="contact", choices=("contact", "judge"),
                    help="cut a collision at the onset of the box contact (as highway-env ends natural "
                         "episodes) or at the judged step (IoU > 0.02)")
-    p.add_argument("--resume", action="store_true")
-    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--resume", action="store_true",
+                   help="continue an interrupted export into --out (windows already written are kept)")
+    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     p.set_defaults(func=_run_guard_data)

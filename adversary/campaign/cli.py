@@ -12,7 +12,8 @@ def add_parsers(subparsers) -> None:
                                           "config; results stream into DIR, resumable.")
     p.add_argument("--config", required=True, help="campaign YAML (see experiments/campaigns/)")
     p.add_argument("--out", required=True, help="campaign directory (result store)")
-    p.add_argument("--backend", choices=("local", "ray"), default="local")
+    p.add_argument("--backend", choices=("local", "ray"), default="local",
+                   help="local process pool, or Ray tasks (pip install 'riskmap-toolkit[ray]')")
     p.add_argument("--workers", type=int, default=1, help="parallel jobs (processes or Ray CPUs)")
     p.add_argument("--address", default=None, help="Ray cluster address (default: a local Ray)")
     p.add_argument("--resume", action="store_true", help="continue a campaign in --out")

@@ -11,6 +11,7 @@ from adversary.crash.config import TrainSelectorConfig, TrainTrafficConfig
 from rasterize.timebase import REPLAN_HZ
 from riskmap.registry import SPEC_HELP, display_name
 from riskmap.infra.cli import (
+    QUIET_HELP,
     add_config_options,
     config_from_args,
     non_negative_int,
@@ -42,7 +43,14 @@ def add_parsers(subparsers) -> None:
     p.add_argument("--out", required=True, help="run directory (best.safetensors, log.jsonl, summary.json)")
     add_config_options(p, TrainTrafficConfig, "epochs", "batch_size", "lr", "kl_weight", "free_bits",
                        "max_windows_per_episode", "seed", "prior_collision_weight", "prior_off_road_weight",
-                       help={"free_bits": "nats of KL per agent left unpenalised",
+                       help={"epochs": "passes over the training windows",
+                             "batch_size": "windows per optimiser step",
+                             "lr": "Adam's learning rate",
+                             "kl_weight": "beta: weight of the KL term (beyond --free-bits) beside the "
+                                          "reconstruction loss",
+                             "seed": "seeds the weights' initialisation, the validation split and the "
+                                     "shuffling",
+                             "free_bits": "nats of KL per agent left unpenalised",
                              "max_windows_per_episode": "use at most this many windows of each episode "
                                                         "(0: all)",
                              "prior_collision_weight": "weight of the disc overlap (m, summed over steps and "
@@ -52,9 +60,10 @@ def add_parsers(subparsers) -> None:
                                                       "the road (m, summed over corners and steps, per "
                                                       "agent; agents off-road in the log left out; 0: off)"},
                        option_types={"epochs": positive_int, "batch_size": positive_int})
-    p.add_argument("--threads", type=int, default=0, help="torch CPU threads (0: torch's default)")
-    p.add_argument("--resume", action="store_true")
-    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--threads", type=int, default=0, help="torch CPU threads (0: as many as torch picks)")
+    p.add_argument("--resume", action="store_true",
+                   help="continue an interrupted run in --out from its last finished epoch")
+    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     p.set_defaults(func=_run_train_traffic)
 
 
@@ -138,10 +147,18 @@ def add_attack_parsers(subparsers) -> None:
     p = subparsers.add_parser("train-selector", help="train CRASH's adversarial-agent selection module")
     p.add_argument("--traffic-model", required=True, help="checkpoint from `adversary train-traffic`")
     p.add_argument("--data", action="append", required=True, help="training dataset (repeatable)")
-    p.add_argument("--out", required=True)
+    p.add_argument("--out", required=True,
+                   help="run directory (selector_mam, selector_no_mam, labels.jsonl, summary.json)")
     add_config_options(p, TrainSelectorConfig, "label_iterations", "max_scenes", "windows_per_episode",
                        "epochs", "seed", "objective", "unroll_steps", "unroll_lr", "lr",
-                       help={"lr": "Adam's learning rate for the selector",
+                       help={"label_iterations": "iterations of the short attack that labels each "
+                                                 "candidate (--objective labels)",
+                             "max_scenes": "training scenes, drawn at random from the windows",
+                             "windows_per_episode": "use at most this many windows of each episode",
+                             "epochs": "passes over the training scenes, per selector",
+                             "seed": "seeds the choice of scenes, the selectors' initialisation and "
+                                     "the shuffling",
+                             "lr": "Adam's learning rate for the selector",
                              "objective": "labels: fit p to each candidate's short-attack loss; unrolled: "
                                           "minimise the generation loss after --unroll-steps "
                                           "differentiable steps on the latents, with p in the loss",
@@ -151,9 +168,10 @@ def add_attack_parsers(subparsers) -> None:
                        option_types={name: positive_int for name in ("label_iterations", "max_scenes",
                                                                      "windows_per_episode", "epochs",
                                                                      "unroll_steps")})
-    p.add_argument("--threads", type=int, default=1)
-    p.add_argument("--resume", action="store_true")
-    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--threads", type=int, default=1, help="torch CPU threads (0 counts as 1)")
+    p.add_argument("--resume", action="store_true",
+                   help="continue an interrupted run in --out (labels and finished epochs are kept)")
+    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     p.set_defaults(func=_run_train_selector)
 
     p = subparsers.add_parser("scenes", help="record held-out attack scenes from highway-env episodes "
@@ -166,26 +184,36 @@ def add_attack_parsers(subparsers) -> None:
                    help="--commonroad: traffic-model family (default: from the file names, USA_US101* -> us101, "
                         "USA_Lanker* -> lankershim)")
     p.add_argument("--seed", type=int, default=None, help="--env: the episodes' seed (required)")
-    p.add_argument("--count", type=positive_int, required=True)
-    p.add_argument("--out", required=True)
-    p.add_argument("--first-episode", type=int, default=0)
+    p.add_argument("--count", type=positive_int, required=True, help="scenes to record")
+    p.add_argument("--out", required=True,
+                   help="scene directory (scene_NNNNN.npz + .json, index.json)")
+    p.add_argument("--first-episode", type=int, default=0,
+                   help="--env: the episode the sweep starts at")
     p.add_argument("--t0", type=float, default=2.0,
                    help="attack time in the episode (s); --commonroad: after each vehicle's first recorded time")
     p.add_argument("--static-agents", type=non_negative_int, default=0,
                    help="--env: parked/stopped vehicles added to each simulated episode (CRASH's "
                         "Motion-Aware Masking benchmark; 0 to 10)")
-    p.add_argument("--resume", action="store_true")
-    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--resume", action="store_true",
+                   help="record more scenes into --out (the scenes its index lists are kept)")
+    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     p.set_defaults(func=_run_scenes)
 
     p = subparsers.add_parser("attack", help="CRASH / distance-based attacks on recorded scenes")
     p.add_argument("--planner", required=True, help="the ego under test, a " + SPEC_HELP)
     p.add_argument("--scenes", required=True, help="a directory from `adversary scenes`")
-    p.add_argument("--count", type=positive_int, required=True)
-    p.add_argument("--selector", choices=SELECTORS, default="crash")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out", required=True)
-    p.add_argument("--workers", type=positive_int, default=1)
+    p.add_argument("--count", type=positive_int, required=True,
+                   help="attack the first N scenes of --scenes")
+    p.add_argument("--selector", choices=SELECTORS, default="crash",
+                   help="who becomes the adversary: crash (CRASH's selection module with Motion-Aware "
+                        "Masking), crash-no-mam (without it), distance (STRIVE's), distance+mam, "
+                        "nearest or random")
+    p.add_argument("--seed", type=int, default=0,
+                   help="seeds the planner and every scene's random draws (with the scene)")
+    p.add_argument("--out", required=True,
+                   help="run directory (OUT/attacks/<scene>.json, OUT/summary.json, OUT/table.md)")
+    p.add_argument("--workers", type=positive_int, default=1,
+                   help="processes attacking batches of scenes (the results do not depend on it)")
     p.add_argument("--batch-size", type=positive_int, default=8, help="scenes optimised together")
     p.add_argument("--traffic-model", default=None,
                    help="traffic CVAE checkpoint (default: checkpoints/crash_traffic_<family>)")
@@ -205,8 +233,9 @@ def add_attack_parsers(subparsers) -> None:
                    help="generate with CRASH's eq. 8 alone, without the validity terms (the adversary's "
                         "collisions with other agents and its kinematic excess; on by default)")
     p.add_argument("--panels", type=non_negative_int, default=0, help="write PNG panels of the first N scenes")
-    p.add_argument("--resume", action="store_true")
-    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--resume", action="store_true",
+                   help="continue an interrupted run in --out (the scenes already attacked are kept)")
+    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     p.set_defaults(func=_run_attack)
 
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from riskmap.infra.cli import QUIET_HELP
+
 
 def _run_export(args: argparse.Namespace) -> int:
     from adversary.export.commonroad import export_run
@@ -36,5 +38,5 @@ def add_parsers(subparsers) -> None:
                    help="also draw each scene with commonroad-io's renderer at the collision step "
                         "(<scene>.png)")
     p.add_argument("--resume", action="store_true", help="continue an export into the same --out")
-    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     p.set_defaults(func=_run_export)

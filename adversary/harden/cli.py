@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from riskmap.infra.cli import add_config_options, config_from_args, positive_int
+from riskmap.infra.cli import QUIET_HELP, add_config_options, config_from_args, positive_int
 
 
 def _run_harden(args: argparse.Namespace) -> int:
@@ -88,7 +88,7 @@ def add_parsers(subparsers) -> None:
     p.add_argument("--search-templates", nargs="+", default=(), metavar="TEMPLATE", choices=sorted(TEMPLATES),
                    help=HELP["search_templates"])
     p.add_argument("--resume", action="store_true", help="go on from the last file written")
-    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     p.set_defaults(func=_run_harden)
 
     p = subparsers.add_parser("harden-report", help="(re)write a hardening run's report page")

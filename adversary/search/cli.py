@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 
 from rasterize.errors import InputError
-from riskmap.infra.cli import add_config_options, config_from_args, positive_int
+from riskmap.infra.cli import QUIET_HELP, add_config_options, config_from_args, positive_int
 from riskmap.registry import SPEC_HELP
 
 
@@ -55,7 +55,12 @@ def add_parsers(subparsers) -> None:
                                              "collides")
     add_config_options(
         p, SearchConfig, "planner", "template", "algorithm", "pop", "gen", "seed", "episode_s", "workers",
-        help={"planner": SPEC_HELP, "pop": "evaluations per generation",
+        help={"planner": SPEC_HELP,
+              "template": "the scenario family searched (its parameters are the search's variables)",
+              "algorithm": "nsga2: NSGA-II; random: uniform random vectors that satisfy the "
+                           "template's constraint (the baseline)",
+              "seed": "seeds the search algorithm, the planner and the simulated scenes",
+              "pop": "evaluations per generation",
               "gen": "generations", "episode_s": "simulated seconds per evaluation",
               "workers": "evaluation processes"},
         option_types={"pop": positive_int, "gen": positive_int, "workers": positive_int},
@@ -65,7 +70,7 @@ def add_parsers(subparsers) -> None:
     p.add_argument("--address", default=None, help="Ray cluster address (default: a local Ray)")
     p.add_argument("--out", required=True, help="directory for evaluations, summary and figures")
     p.add_argument("--resume", action="store_true", help="continue a run in --out")
-    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     p.set_defaults(func=_run_search)
     p = subparsers.add_parser("search-report", help="rebuild the summary and figures of a search run")
     p.add_argument("--out", required=True, help="directory of a search run")

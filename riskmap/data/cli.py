@@ -43,7 +43,7 @@ def add_parsers(sub) -> None:
                                        "them from recorded CommonRoad traffic")
     p.add_argument("--env",
                    help="highway-v0, highway-fast-v0, merge-v0, roundabout-v0 or intersection-v0")
-    p.add_argument("--episodes", type=positive_int)
+    p.add_argument("--episodes", type=positive_int, help="episodes to record (with --env)")
     p.add_argument("--from-commonroad", nargs="+", metavar="DIR_OR_FILE",
                    help="CommonRoad .xml files or directories: every recorded vehicle with 2 s of "
                         "history and 6 s of future is a demonstrator (instead of --env)")
@@ -51,7 +51,9 @@ def add_parsers(sub) -> None:
                    help="the demonstrator: idm (IDM/MOBIL) or yielding (IDM/MOBIL that gives way "
                         "at conflict zones by gap acceptance); default: yielding at "
                         "intersection-v0, idm elsewhere")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0,
+                   help="episode i resets the env with a seed drawn from (SEED, i); with "
+                        "--from-commonroad only recorded in the manifest")
     p.add_argument("--out", required=True, help="dataset directory to create")
     p.add_argument("--workers", type=positive_int, default=1, help="processes (default 1)")
     p.add_argument("--resume", action="store_true", help="continue an interrupted collection")

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from rasterize.errors import InputError
 from rasterize.timebase import REPLAN_HZ
-from riskmap.infra.cli import comma_list, positive_float, positive_int
+from riskmap.infra.cli import QUIET_HELP, comma_list, positive_float, positive_int
 from riskmap.registry import SPEC_HELP
 
 
@@ -115,17 +115,21 @@ def add_parsers(sub) -> None:
     p = sub.add_parser("drive", help="drive closed-loop episodes with a planner")
     p.add_argument("--checkpoint", help="risk-map planner checkpoint (same as --planner riskmap:CKPT)")
     p.add_argument("--planner", help=SPEC_HELP)
-    p.add_argument("--env", required=True)
-    p.add_argument("--episodes", type=positive_int, required=True)
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out", required=True)
+    p.add_argument("--env", required=True, help="highway-env id, e.g. highway-v0")
+    p.add_argument("--episodes", type=positive_int, required=True, help="episodes to drive")
+    p.add_argument("--seed", type=int, default=0,
+                   help="episode i resets the env with a seed drawn from (SEED, i), the traffic "
+                        "`riskmap collect` met with the same seed; also the planner's seed")
+    p.add_argument("--out", required=True,
+                   help="run directory (OUT/episodes/episode_NNNNNN.json, OUT/summary.json)")
     p.add_argument("--frames", action="store_true",
                    help="write a PNG per replan (OUT/frames): the scene and the plan")
     p.add_argument("--goal-variance", type=positive_float, default=None,
                    help="cells²; planning-time goal variance of a risk-map planner (default: the "
                         "checkpoint's)")
-    p.add_argument("--resume", action="store_true")
-    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--resume", action="store_true",
+                   help="continue an interrupted drive in --out (finished episodes are kept)")
+    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     p.set_defaults(func=_cmd_drive)
 
     p = sub.add_parser("check-planner", help="drive a planner on a few scenes of each family and "
@@ -142,8 +146,9 @@ def add_parsers(sub) -> None:
                    help="episodes per family (with --commonroad: recorded vehicles per file)")
     p.add_argument("--seconds", type=positive_float, default=8.0,
                    help="seconds driven per highway-env episode")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--seed", type=int, default=0,
+                   help="seed of the planner and of the highway-env episodes (as drive --seed)")
+    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     p.set_defaults(func=_cmd_check_planner)
 
     p = sub.add_parser("evaluate", help="closed-loop benchmark of planners (Table I metrics)")
@@ -162,7 +167,9 @@ def add_parsers(sub) -> None:
     p.add_argument("--commonroad", nargs="+", metavar="DIR_OR_FILE",
                    help="evaluate on recorded vehicles of CommonRoad files instead (--mode log or "
                         "reactive)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seed", type=int, default=0,
+                   help="seed of the planners and of the simulated episodes (as drive --seed); with "
+                        "--commonroad it draws the --max-episodes vehicles")
     p.add_argument("--mode", choices=("log", "reactive"), default="log",
                    help="log: other vehicles replay the human's record; reactive: IDM/MOBIL traffic "
                         "(with --commonroad: the recorded paths, braking for the ego)")
@@ -170,10 +177,14 @@ def add_parsers(sub) -> None:
                    help="simulated seconds per episode (default: the family's length)")
     p.add_argument("--replan-hz", type=positive_int, default=REPLAN_HZ,
                    help="how often planners replan (Hz; a divisor of the 10 Hz control rate; default 2)")
-    p.add_argument("--out", required=True)
+    p.add_argument("--out", required=True,
+                   help="run directory (OUT/table.md, OUT/results.json, OUT/episodes.csv, per-episode "
+                        "records)")
     p.add_argument("--workers", type=positive_int, default=1, help="processes (default 1)")
-    p.add_argument("--resume", action="store_true")
-    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--resume", action="store_true",
+                   help="continue an interrupted evaluation in --out (finished episodes are kept; it "
+                        "may name more planners)")
+    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     p.set_defaults(func=_cmd_evaluate)
 
     p = sub.add_parser("tune-goal-variance", help="choose a risk-map checkpoint's planning-time goal "

@@ -31,14 +31,16 @@ def add_parsers(sub) -> None:
     q = fig_sub.add_parser("scenes", help="BEV rasters with the future path overlaid")
     q.add_argument("--data", required=True, help="dataset directory (from riskmap collect)")
     q.add_argument("--out", required=True, help="directory for the PNGs")
-    q.add_argument("--count", type=positive_int, default=8)
+    q.add_argument("--count", type=positive_int, default=8,
+                   help="windows drawn, spread evenly over the dataset (one PNG each)")
     q.set_defaults(func=_cmd_figures_scenes)
     q = fig_sub.add_parser("plans", help="BEV | risk map | goal map | SVF | plan vs demo panels")
     q.add_argument("--checkpoint", required=True, help="risk-map planner checkpoint")
     q.add_argument("--data", required=True, help="dataset directory (same raster config)")
     q.add_argument("--out", required=True, help="directory for the PNGs")
-    q.add_argument("--count", type=positive_int, default=6)
-    q.add_argument("--seed", type=int, default=0)
+    q.add_argument("--count", type=positive_int, default=6,
+                   help="windows planned, spread evenly over the dataset (or --groups)")
+    q.add_argument("--seed", type=int, default=0, help="the planner's seed")
     q.add_argument("--groups", type=comma_list, default=None,
                    help="recorded data: only windows of these configurations (names or numbers)")
     q.add_argument("--goal", choices=("route", "human"), default="route",

@@ -7,7 +7,7 @@ from pathlib import Path
 
 from riskmap.guard.config import GuardTrainConfig, TGATConfig
 from riskmap.guard.dataset import GuardCollectConfig
-from riskmap.infra.cli import add_config_options, config_from_args, positive_int
+from riskmap.infra.cli import QUIET_HELP, add_config_options, config_from_args, positive_int
 
 
 def cmd_collect(args: argparse.Namespace) -> int:
@@ -67,18 +67,25 @@ def add_parsers(sub) -> None:
               "seen_test_episodes": "seen-test episodes per family",
               "unseen_episodes": "held-out family episodes",
               "planner_every": "every k-th episode is also driven by the risk-map planner",
-              "episode_s": "simulated seconds per episode"},
+              "episode_s": "simulated seconds per episode",
+              "seed": "seed of the training and validation episodes; the seen test uses SEED + 1, "
+                      "the held-out families SEED + 2"},
         option_types={name: positive_int for name in ("train_episodes", "seen_test_episodes",
                                                       "unseen_episodes", "planner_every")})
-    q.add_argument("--resume", action="store_true")
-    q.add_argument("--quiet", action="store_true")
+    q.add_argument("--resume", action="store_true",
+                   help="continue an interrupted collection in --out (finished jobs are kept)")
+    q.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     q.set_defaults(func=cmd_collect)
     q = guard_sub.add_parser("train", help="train the TGAT accident predictor")
     q.add_argument("--data", required=True, help="directory from `riskmap guard collect`")
     q.add_argument("--out", required=True, help="run directory")
     add_config_options(q, GuardTrainConfig, "epochs", "patience", "lr", "batch_size", "seed", "ttc_weight",
                        "alert_ratio",
-                       help={"patience": "epochs without a better val AP",
+                       help={"epochs": "most training epochs (fewer when --patience stops it early)",
+                             "lr": "Adam's learning rate",
+                             "batch_size": "windows per optimiser step",
+                             "seed": "seeds the weights' initialisation and the shuffling",
+                             "patience": "epochs without a better val AP",
                              "ttc_weight": "weight of the time-to-contact loss beside the BCE",
                              "alert_ratio": "share of validation decision frames that alert: sets the "
                                             "checkpoint's alert threshold"},
@@ -88,8 +95,9 @@ def add_parsers(sub) -> None:
     add_config_options(q, TGATConfig, "horizon_s",
                        help={"horizon_s": "label horizon: a window is positive when the ego touches the "
                                           "neighbour within this many seconds of its last event (≤ 3)"})
-    q.add_argument("--resume", action="store_true")
-    q.add_argument("--quiet", action="store_true")
+    q.add_argument("--resume", action="store_true",
+                   help="continue an interrupted run in --out from its last finished epoch")
+    q.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     q.set_defaults(func=cmd_train)
     q = guard_sub.add_parser("evaluate", help="score a TGAT checkpoint on splits of a guard dataset")
     q.add_argument("--checkpoint", default="checkpoints/guard_tgat", help="checkpoint path without suffix")

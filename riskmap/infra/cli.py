@@ -1,4 +1,5 @@
-"""What every command line of the toolkit shares: argument types, options made from the config
+"""What every command line of the toolkit shares: the top-level parser (`command_parser`: `--help`
+showing each option's default, `--version`), argument types, options made from the config
 dataclasses (`add_config_options` / `config_from_args`: the dataclass holds each default once), and
 the one way `main` reports errors (one line, exit 2, for bad input; 130 on Ctrl-C, work kept)."""
 
@@ -12,6 +13,57 @@ import types
 import typing
 
 from rasterize.errors import InputError
+
+
+DISTRIBUTION = "riskmap-toolkit"     # the installed distribution (pyproject.toml's project.name)
+QUIET_HELP = "no progress bar or progress lines"
+
+
+class DefaultsHelpFormatter(argparse.HelpFormatter):
+    """`--help` that appends each option's default where it says something: not for switches,
+    required options, positionals or a default of None or nothing, nor where the help already
+    names its default (or says `%(default)s`)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        default = action.default
+        if (not action.option_strings or action.required or action.nargs == 0
+                or default is None or default is False or default is argparse.SUPPRESS
+                or (isinstance(default, (tuple, list)) and not default)
+                or "default" in text.lower()):
+            return text
+        if isinstance(default, (tuple, list)):
+            default = ",".join(str(v) for v in default)
+        shown = str(default).replace("%", "%%")       # the help string is %-formatted afterwards
+        return f"{text} (default: {shown})" if text else f"default: {shown}"
+
+
+class CommandParser(argparse.ArgumentParser):
+    """An ArgumentParser whose `--help` shows defaults (`DefaultsHelpFormatter`); the subcommand
+    parsers made from it (`add_subparsers` makes them of the parent's class) are the same."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        kwargs.setdefault("formatter_class", DefaultsHelpFormatter)
+        super().__init__(*args, **kwargs)
+
+
+def package_version() -> str:
+    """The installed toolkit's version (importlib.metadata), or a note that it is not installed."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version(DISTRIBUTION)
+    except PackageNotFoundError:
+        return "unknown (riskmap-toolkit is not installed; pip install -e .)"
+
+
+def command_parser(prog: str, doc: str) -> CommandParser:
+    """The top-level parser of a console command: `doc`'s first paragraph as its description,
+    defaults in every `--help`, and `--version`."""
+    parser = CommandParser(prog=prog, description=" ".join(doc.split("\n\n")[0].split()))
+    parser.add_argument("--version", action="version", version=f"%(prog)s {package_version()}",
+                        help=f"print the installed {DISTRIBUTION} version and exit")
+    return parser
 
 
 def _number(text: str, kind: type, ok, must: str):

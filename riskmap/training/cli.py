@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from riskmap.infra.cli import add_config_options, config_from_args, positive_int
+from riskmap.infra.cli import QUIET_HELP, add_config_options, config_from_args, positive_int
 from riskmap.training.config import PLANNERS, BaselineTrainConfig, TrainConfig
 
 
@@ -34,6 +34,10 @@ HELP = {
     "data": "dataset directory (from riskmap collect)",
     "out": "run directory",
     "resolution": "risk-map cells a side",
+    "epochs": "passes over the training windows",
+    "batch_size": "windows per optimiser step",
+    "lr": "Adam's learning rate",
+    "seed": "seeds the weights' initialisation, the augmentation and the order of the windows",
     "uncertainty_weight": "v of eq. 5",
     "sigma_x": "uncertainty across agents (m)",
     "sigma_y": "uncertainty along agents (m)",
@@ -83,14 +87,15 @@ def add_parsers(sub) -> None:
                        "freeze_risk", "planner", "steps", "max_forward", "max_across", "workers", "cache", help=HELP,
                        option_types=POSITIVE, choices={"planner": PLANNERS})
     p.add_argument("--resume", action="store_true", help="continue an interrupted run exactly")
-    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     p.set_defaults(func=_cmd_train)
 
     p = sub.add_parser("train-baseline", help="train a behaviour-cloning baseline (cnn, cnn_lstm, rvsg)")
-    p.add_argument("kind", choices=("cnn", "cnn_lstm", "cnn-lstm", "rvsg"))
+    p.add_argument("kind", choices=("cnn", "cnn_lstm", "cnn-lstm", "rvsg"),
+                   help="the baseline network (cnn-lstm is another spelling of cnn_lstm)")
     add_config_options(p, BaselineTrainConfig, "data", "out", "epochs", "batch_size", "lr",
                        "history_frames", "val_groups", "seed", "max_windows", "predict_s",
                        help=HELP, option_types=POSITIVE)
     p.add_argument("--resume", action="store_true", help="continue an interrupted run exactly")
-    p.add_argument("--quiet", action="store_true")
+    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
     p.set_defaults(func=_cmd_train_baseline)
