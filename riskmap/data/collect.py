@@ -6,36 +6,34 @@ intersections by default the `yielding` teacher, which also gives way at conflic
 acceptance (`riskmap.sim.yielding`; `--human idm` keeps plain IDM/MOBIL) -- step the
 road at `record_hz`, record every vehicle, drop vehicles far from the ego (they cannot reach the
 scene and they cost time), then cut training windows (history + future at `window_dt_s`) and
-write them as one shard per episode, atomically. `--resume` skips the episodes already written.
+write them as one shard per episode (`EnvCollectSource`, collected by the one driver
+`riskmap.data.collect_source.collect_source`: atomic shards, `--resume`, workers).
 """
 
 from __future__ import annotations
 
-import functools
-import json
-import shutil
-import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-import numpy as np
-
 from rasterize.config import FAMILY_EXTENTS, RasterConfig, family_of_env
 from rasterize.errors import InputError
-from rasterize.scene_io import pack_scenes
 from rasterize.timebase import CONTROL_HZ, FUTURE_S, HISTORY_S, PLAN_DT_S
-from riskmap.infra.atomic import write_json, write_npz
-from riskmap.infra.parallel import run_parallel
-from riskmap.infra.provenance import provenance
-from riskmap.infra.rundir import holds_work, lock_out_dir
+# The dataset layout and its helpers live with the one collect driver; named here too, where
+# the dataset readers and older callers import them from.
+from riskmap.data.collect_source import (  # noqa: F401
+    FORMAT_VERSION,
+    INDEX,
+    MANIFEST,
+    SHARD_DIR,
+    collect_source,
+    read_episode_info,
+    shard_path,
+    write_episode_shard,
+    write_index_and_manifest,
+)
 from riskmap.sim.episode import FAMILY_SETUPS, Episode, FamilySetup, make_env
 from riskmap.sim.rollout import LoopConfig, drive_world
 from riskmap.sim.yielding import DEMONSTRATORS, demonstrator
-
-FORMAT_VERSION = 2
-SHARD_DIR = "shards"
-MANIFEST = "manifest.json"
-INDEX = "index.json"
 
 
 @dataclass(frozen=True)
@@ -108,132 +106,35 @@ def run_episode(env, config: CollectConfig, episode: int):
     return windows, info
 
 
-def shard_path(out: Path, episode: int) -> Path:
-    return out / SHARD_DIR / f"episode_{episode:06d}.npz"
+@dataclass(frozen=True)
+class EnvCollectSource:
+    """`riskmap collect --env`'s items: episodes 0..N-1 of `config`, each driven by the
+    demonstrator in this process's env (one per worker, reused across its episodes)."""
 
+    config: CollectConfig
+    unit = "episode"
 
-def write_episode_shard(out: Path, windows: list, info: dict) -> None:
-    arrays = pack_scenes(windows) if windows else {}
-    arrays["episode_info"] = np.frombuffer(json.dumps(info, sort_keys=True).encode(), np.uint8)
-    write_npz(shard_path(out, info["episode"]), arrays)
+    @property
+    def label(self) -> str:
+        return f"collect {self.config.env_id}"
 
+    def items(self) -> range:
+        return range(self.config.episodes)
 
-def read_episode_info(path: Path) -> dict | None:
-    """The info of a finished shard, or None if it is missing or unreadable."""
-    try:
-        with np.load(path) as data:
-            return json.loads(bytes(data["episode_info"]).decode())
-    except Exception:  # noqa: BLE001 - any unreadable shard is simply redone
+    def worker_state(self):
+        import cv2
+
+        cv2.setNumThreads(1)
+        return make_env(self.config.env_id, self.config.record_hz)
+
+    def windows(self, env, episode: int) -> tuple[list, dict]:
+        return run_episode(env, self.config, episode)
+
+    def manifest_extra(self, infos: list[dict]) -> None:
         return None
-
-
-# --- worker processes: one env per process, reused across episodes -------------------------------
-
-_WORKER: dict = {}
-
-
-def _worker_init(config: CollectConfig, out: str) -> None:
-    import cv2
-
-    cv2.setNumThreads(1)
-    _WORKER["config"], _WORKER["out"] = config, Path(out)
-    _WORKER["env"] = make_env(config.env_id, config.record_hz)
-
-
-def _worker_episode(episode: int) -> dict:
-    windows, info = run_episode(_WORKER["env"], _WORKER["config"], episode)
-    write_episode_shard(_WORKER["out"], windows, info)
-    return info
-
-
-def _check_out_dir(out: Path, config: CollectConfig, resume: bool) -> None:
-    manifest = out / MANIFEST
-    if manifest.exists():
-        if not resume:
-            raise InputError(f"--out {out} already holds a dataset; pass --resume to continue it "
-                             "or choose another --out")
-        try:
-            previous = json.loads(manifest.read_text())["config"]
-        except (OSError, ValueError, KeyError):
-            raise InputError(f"{manifest} is unreadable; delete {out} and collect again") from None
-        mine = json.loads(json.dumps(config.to_dict()))
-        if "human" in mine:
-            previous.setdefault("human", "idm")   # datasets from before the choice were IDM/MOBIL
-        if isinstance(previous.get("raster"), dict):
-            previous["raster"].setdefault("predict_s", 0.0)   # from before predict_s: drew none
-        for data in (previous, mine):
-            data.get("family_setup", {}).pop("teacher", None)   # `human` says who drove
-        if {k: v for k, v in previous.items() if k != "episodes"} != \
-                {k: v for k, v in mine.items() if k != "episodes"}:
-            raise InputError(f"--out {out} was collected with a different configuration; "
-                             "resume with the same --env/--seed or choose another --out")
-    elif holds_work(out):
-        raise InputError(f"--out {out} exists and is not a dataset directory; choose another --out")
-
-
-def write_index_and_manifest(out: Path, config: CollectConfig, infos: list[dict],
-                             elapsed_s: float, extra: dict | None = None) -> dict:
-    """Write the index of shards and the manifest (config, provenance, counts, and `extra`)."""
-    infos = sorted(infos, key=lambda i: i["episode"])
-    # A shard's group (recorded data: site and configuration) lets training split by group.
-    index = {"shards": [{"file": f"{SHARD_DIR}/{shard_path(out, i['episode']).name}",
-                         "episode": i["episode"], "windows": i["windows"],
-                         **({"group": i["group"]} if "group" in i else {})} for i in infos]}
-    manifest = {
-        "config": config.to_dict(),
-        "seed": config.seed,
-        **provenance(),
-        "counts": {
-            "episodes": len(infos),
-            "windows": int(sum(i["windows"] for i in infos)),
-            "ego_crashes": int(sum(i["ego_crashed"] for i in infos)),
-            "ego_off_network": int(sum(i["ego_off_network"] for i in infos)),
-            "simulated_s": float(sum(i["simulated_s"] for i in infos)),
-        },
-        "last_run_elapsed_s": round(elapsed_s, 3),
-        **(extra or {}),
-    }
-    # The manifest first: it is what --resume recognises a dataset by (a run killed between the
-    # two writes resumes and rewrites the index).
-    write_json(out / MANIFEST, manifest)
-    write_json(out / INDEX, index)
-    return manifest
 
 
 def collect(config: CollectConfig, out: Path, workers: int = 1, resume: bool = False,
             progress: bool = True) -> dict:
     """Collect `config.episodes` episodes into `out`; returns the manifest."""
-    from tqdm import tqdm
-
-    out = Path(out)
-    if not (isinstance(workers, int) and workers >= 1):
-        raise InputError(f"--workers must be a positive integer, got {workers!r}")
-    _check_out_dir(out, config, resume)
-    created = not out.exists()
-    lock_out_dir(out)   # one writer per dataset (creates it)
-    start = time.perf_counter()
-    done = {}
-    for episode in range(config.episodes):
-        info = read_episode_info(shard_path(out, episode)) if resume else None
-        if info is not None:
-            done[episode] = info
-    todo = [e for e in range(config.episodes) if e not in done]
-    infos = list(done.values())
-    (out / SHARD_DIR).mkdir(parents=True, exist_ok=True)
-    # Write the manifest first so that an interrupted run is recognised by --resume.
-    write_index_and_manifest(out, config, infos, 0.0)
-    bar = tqdm(total=config.episodes, initial=len(done), unit="episode", disable=not progress,
-               desc=f"collect {config.env_id}")
-    try:
-        for _, info in run_parallel(_worker_episode, todo, workers,
-                                    initializer=functools.partial(_worker_init, config, str(out))):
-            infos.append(info)
-            bar.update(1)
-            bar.set_postfix(windows=sum(i["windows"] for i in infos))
-    except BaseException:
-        if created and not any((out / SHARD_DIR).iterdir()):
-            shutil.rmtree(out, ignore_errors=True)
-        raise
-    finally:
-        bar.close()
-    return write_index_and_manifest(out, config, infos, time.perf_counter() - start)
+    return collect_source(EnvCollectSource(config), out, workers, resume, progress)

@@ -33,8 +33,9 @@ in several files. Here:
 A directory mixing sites is refused (extents and speeds differ; collect each site on its own).
 Set-based scenarios (`_S-1`: intervals instead of trajectories) in a directory are skipped and
 counted; a single one, or a directory of nothing else, is an error.
-Same shard format, index and manifest as `riskmap collect`; `--resume` keeps the shards already
-written.
+Each demonstrator is an item of `RecordingCollectSource`, written by the one collect driver
+(`riskmap.data.collect_source.collect_source`): the same shard format, index and manifest as
+`riskmap collect --env`; `--resume` keeps the shards already written.
 """
 
 from __future__ import annotations
@@ -42,8 +43,6 @@ from __future__ import annotations
 import hashlib
 import math
 import re
-import shutil
-import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
@@ -57,17 +56,7 @@ from rasterize.errors import InputError
 from rasterize.frames import ego_from_world, ego_pose
 from rasterize.highway import RouteRule
 from rasterize.timebase import FUTURE_S, HISTORY_S, PLAN_DT_S
-from riskmap.data.collect import (
-    FORMAT_VERSION,
-    MANIFEST,
-    SHARD_DIR,
-    _check_out_dir,
-    read_episode_info,
-    shard_path,
-    write_episode_shard,
-    write_index_and_manifest,
-)
-from riskmap.infra.rundir import lock_out_dir
+from riskmap.data.collect_source import FORMAT_VERSION, MANIFEST, check_out_dir, collect_source
 
 SOURCE = "commonroad"
 # NGSIM in CommonRoad: <country>_<site>-<configuration>_<variant>_<T|S>-<version>
@@ -136,7 +125,7 @@ class CommonRoadCollectConfig:
         data["files"] = [list(f) for f in self.files]
         data["env_id"] = SOURCE
         data["format_version"] = FORMAT_VERSION
-        # Who demonstrated: the recorded drivers. `riskmap.data.collect._check_out_dir` reads a
+        # Who demonstrated: the recorded drivers. `riskmap.data.collect_source.check_out_dir` reads a
         # manifest without this key as an IDM/MOBIL one, so it is always written.
         data["human"] = "recorded"
         return data
@@ -382,6 +371,53 @@ def derive_settings(demos: list[Demonstrator], traffics: dict[Path, RecordedTraf
     return replace(base, route_accel_mps2=accel), summary
 
 
+@dataclass(frozen=True)
+class RecordingCollectSource:
+    """`riskmap collect --from-commonroad`'s items: every demonstrator (`unique_demonstrators`),
+    numbered in order; their files already parsed (`traffics`), so it runs in one process."""
+
+    config: CommonRoadCollectConfig
+    demos: tuple[Demonstrator, ...]
+    traffics: dict[Path, RecordedTraffic]
+    skipped: dict                      # what `unique_demonstrators` left out, for the manifest
+    derivation: dict | None            # `derive_settings`' summary (None when not derived)
+    unit = "vehicle"
+    label = "collect commonroad"
+
+    def items(self) -> range:
+        return range(len(self.demos))
+
+    def worker_state(self) -> None:
+        return None
+
+    def windows(self, state: None, episode: int) -> tuple[list, dict]:
+        demo = self.demos[episode]
+        traffic = self.traffics[demo.path]
+        scene_config = self.config.scene
+        windows = [traffic.scene(demo.agent, step, scene_config) for step in demo.steps]
+        first, last = traffic.span(demo.agent)
+        errors = [window_goal_error(window).tolist() for window in windows]
+        info = {"episode": episode, "file": demo.path.name, "scenario": traffic.name,
+                "group": demo.group, "vehicle_id": int(traffic.ids[demo.agent]),
+                "windows": len(windows), "time_steps": list(demo.steps),
+                "goal_error_m": errors, "simulated_s": (last - first) * traffic.dt_s,
+                "ego_crashed": False, "ego_off_network": False}
+        return windows, info
+
+    def manifest_extra(self, infos: list[dict]) -> dict:
+        """The settings used (derived or not), the goal error's spread, what was skipped and the
+        groups."""
+        config = self.config
+        errors = np.array([e for i in infos for e in i["goal_error_m"]]).reshape(-1, 2)
+        derived = {"speed_limit_mps": config.speed_limit_mps, "route_accel_mps2": config.route_accel_mps2,
+                   "extent": asdict(config.raster.extent),
+                   "goal_error_rms_m": {"along": float(np.sqrt(np.mean(errors[:, 0] ** 2))),
+                                        "across": float(np.sqrt(np.mean(errors[:, 1] ** 2)))},
+                   "derived_from_data": config.derive, "derivation": self.derivation}
+        return {"derived": derived, "skipped": self.skipped,
+                "groups": sorted({i["group"] for i in infos})}
+
+
 def collect_commonroad(inputs: list[str | Path], out: Path, resume: bool = False,
                        progress: bool = True, **settings) -> dict:
     """Cut demonstrator windows from CommonRoad recordings into dataset `out`; returns the manifest.
@@ -393,7 +429,7 @@ def collect_commonroad(inputs: list[str | Path], out: Path, resume: bool = False
     check_one_site(files)
     config = CommonRoadCollectConfig(files=tuple((p.name, _sha256(p)) for p in files), **settings)
     if not (out / MANIFEST).exists():
-        _check_out_dir(out, config, resume)     # a wrong --out fails before the slow reading
+        check_out_dir(out, config, resume)     # a wrong --out fails before the slow reading
     demos, traffics, skipped = unique_demonstrators(files, config, progress)
     if not demos:
         raise InputError(no_demonstrators_message(files, config, skipped))
@@ -402,51 +438,5 @@ def collect_commonroad(inputs: list[str | Path], out: Path, resume: bool = False
     derivation = None
     if config.derive:
         config, derivation = derive_settings(demos, traffics, config)
-    _check_out_dir(out, config, resume)
-    created = not out.exists()
-    lock_out_dir(out)   # one writer per dataset (creates it)
-    start = time.perf_counter()
-    (out / SHARD_DIR).mkdir(parents=True, exist_ok=True)
-    write_index_and_manifest(out, config, [], 0.0)   # lets --resume recognise an interrupted run
-    infos: list[dict] = []
-    try:
-        _write_shards(demos, traffics, config, out, resume, progress, infos)
-    except BaseException:
-        if created and not any((out / SHARD_DIR).iterdir()):
-            shutil.rmtree(out, ignore_errors=True)
-        raise
-    errors = np.array([e for i in infos for e in i["goal_error_m"]]).reshape(-1, 2)
-    derived = {"speed_limit_mps": config.speed_limit_mps, "route_accel_mps2": config.route_accel_mps2,
-               "extent": asdict(config.raster.extent),
-               "goal_error_rms_m": {"along": float(np.sqrt(np.mean(errors[:, 0] ** 2))),
-                                    "across": float(np.sqrt(np.mean(errors[:, 1] ** 2)))},
-               "derived_from_data": config.derive, "derivation": derivation}
-    groups = sorted({i["group"] for i in infos})
-    return write_index_and_manifest(out, config, infos, time.perf_counter() - start,
-                                    extra={"derived": derived, "skipped": skipped, "groups": groups})
-
-
-def _write_shards(demos: list[Demonstrator], traffics: dict[Path, RecordedTraffic],
-                  config: CommonRoadCollectConfig, out: Path, resume: bool, progress: bool,
-                  infos: list[dict]) -> None:
-    """Write the shard of every demonstrator not yet written; append every shard's info to `infos`."""
-    from tqdm import tqdm
-
-    scene_config = config.scene
-    bar = tqdm(demos, unit="vehicle", disable=not progress, desc="collect commonroad")
-    for episode, demo in enumerate(bar):
-        info = read_episode_info(shard_path(out, episode)) if resume else None
-        if info is None:
-            traffic = traffics[demo.path]
-            windows = [traffic.scene(demo.agent, step, scene_config) for step in demo.steps]
-            first, last = traffic.span(demo.agent)
-            errors = [window_goal_error(window).tolist() for window in windows]
-            info = {"episode": episode, "file": demo.path.name, "scenario": traffic.name,
-                    "group": demo.group, "vehicle_id": int(traffic.ids[demo.agent]),
-                    "windows": len(windows), "time_steps": list(demo.steps),
-                    "goal_error_m": errors, "simulated_s": (last - first) * traffic.dt_s,
-                    "ego_crashed": False, "ego_off_network": False}
-            write_episode_shard(out, windows, info)
-        infos.append(info)
-        bar.set_postfix(windows=sum(i["windows"] for i in infos))
-    bar.close()
+    source = RecordingCollectSource(config, tuple(demos), traffics, skipped, derivation)
+    return collect_source(source, out, resume=resume, progress=progress)
