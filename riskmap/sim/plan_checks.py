@@ -60,10 +60,14 @@ def _scale_problems(waypoints: np.ndarray, speed: float, dt: float) -> list[str]
     if speed > 3.0 and abs(steps[0] / speed - KMH_PER_MS) < 0.4:
         return [(f"the first step implies {steps[0]:.1f} m/s at a speed of {speed:.1f} m/s "
                 f"(3.6x: km/h?); the waypoints are metres {dt:g} s apart")]
-    if first > _reach_m(speed, dt):
+    reach = _reach_m(speed, dt)
+    if first > 2.0 * reach + 5.0:      # far beyond any overshoot: the frame is wrong
         return [(f"the first waypoint is {first:.0f} m from the ego at {speed:.1f} m/s; "
                 "waypoints are in the ego frame (origin at the ego, x forward, y left), "
                 "not world coordinates")]
+    if first > reach:                  # a plan ahead of the car: the controller cannot follow it
+        return [(f"the first waypoint is {first:.1f} m from the ego at {speed:.1f} m/s, beyond "
+                 f"the {reach:.1f} m the car can cover in {dt:g} s; the plan runs ahead of the car")]
     if steps.max() > MAX_SPEED_MS:
         return [f"the waypoints imply {steps.max():.0f} m/s; they are metres {dt:g} s apart"]
     return []
