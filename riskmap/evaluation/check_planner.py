@@ -4,9 +4,11 @@ each, where it breaks the planner contract (README, "The planner contract").
 The planner drives short closed-loop episodes through the one rollout loop. Every plan it makes is
 checked (`riskmap.sim.plan_checks.plan_problems`, the checks the loop itself counts in every
 command); a plan that breaks the contract (or a call that raises) is recorded and replaced by a
-constant-velocity plan so that the episode, and the check, go on. Then a few of the scenes it saw
-are planned again by two fresh planners of the same SPEC and seed (determinism), and the time per
-call is compared with the replan period.
+constant-velocity plan so that the episode, and the check, go on. No solution (`NoSolution`) is
+within the contract: counted apart (`Findings.no_solution`), and the loop brakes as it always does.
+What the planner declares (`PlannerTraits`, e.g. `attach`) it declares through the checking
+wrapper too. Then a few of the scenes it saw are planned again by two fresh planners of the same
+SPEC and seed (determinism), and the time per call is compared with the replan period.
 """
 
 from __future__ import annotations
@@ -19,7 +21,7 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 from rasterize.timebase import REPLAN_HZ
-from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, Plan, PlannerTraits
+from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, NoSolution, Plan, PlannerTraits
 from riskmap.sim.plan_checks import plan_problems
 
 FAMILY_ENVS = ("highway-v0", "merge-v0", "roundabout-v0", "intersection-v0")
@@ -48,9 +50,13 @@ class Findings:
     first: dict = field(default_factory=dict)
     plans: int = 0
     times_s: list = field(default_factory=list)
+    # replans without a plan (`NoSolution`, or a `cr:` planner's missing trajectory): within the
+    # contract, so not a breach; the loop brakes as in every command. Count and the first one.
+    no_solution: int = 0
+    no_solution_first: str | None = None
 
     def add(self, message: str, where: str) -> None:
-        kind = re.sub(r"\d+(\.\d+)?", "#", message)
+        kind = re.sub(r"\d+(\.\d+)?", "#", re.sub(r"0x[0-9a-fA-F]+", "0x#", message))
         self.counts[kind] += 1
         self.first.setdefault(kind, (message, where))
 
@@ -92,6 +98,11 @@ class _Checking:
         started = time.perf_counter()
         try:
             plan = self.planner.plan(scene)
+        except NoSolution as why:
+            self.findings.no_solution += 1
+            if self.findings.no_solution_first is None:
+                self.findings.no_solution_first = f"on {where}: {why or 'no trajectory'}"
+            raise                          # the loop counts it and brakes, as in every command
         except Exception as err:  # noqa: BLE001
             self.findings.add(f"plan() raised {type(err).__name__}: {err}", where)
             return _cv(scene)
@@ -116,6 +127,8 @@ def _determinism(spec: str, config: CheckConfig, scenes: list, findings: Finding
             try:
                 planner.reset(scene)
                 answers.append(np.asarray(planner.plan(scene).waypoints, dtype=np.float64))
+            except NoSolution:
+                answers.append(np.zeros((0, 2)))      # no plan: the same answer if both say so
             except Exception:  # noqa: BLE001 - already reported while driving
                 return
         if answers[0].shape != answers[1].shape or not np.allclose(answers[0], answers[1],

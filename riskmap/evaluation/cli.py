@@ -82,6 +82,9 @@ def _cmd_check_planner(args: argparse.Namespace) -> int:
         times = 1000 * np.asarray(findings.times_s)
         print(f"{findings.plans} plans; {np.median(times):.1f} ms median, {times.max():.1f} ms "
               "max per call (the loop replans every 500 ms)")
+    if findings.no_solution:            # within the contract, but a user must see it
+        print(f"{findings.no_solution} of {findings.plans + findings.no_solution} replans without a solution (the ego braked), "
+              f"first {findings.no_solution_first}")
     for line in findings.lines():
         print(f"BROKEN: {line}")
     print(f"{args.spec}: {len(findings.counts)} contract problem(s)" if findings.counts

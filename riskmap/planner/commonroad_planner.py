@@ -111,9 +111,10 @@ class CommonRoadPlanner:
             from rasterize.commonroad.lanelets import lanelets_from_lanes
 
             if self._lanes is not None:      # the road's lanes, cut to where the scene reaches
-                network = _network_of(lanelets_from_lanes(self._lanes, _reach_xy(scene), cut=True))
+                lanelets = lanelets_from_lanes(self._lanes, _reach_xy(scene), cut=True)
             else:
-                network = _network_of(lanelets_from_lanes(scene.lanes, scene.states[:, scene.current_index, :2]))
+                lanelets = lanelets_from_lanes(scene.lanes, scene.states[:, scene.current_index, :2])
+            network = _network_of(lanelets)
         scenario = Scenario(STEP_S)
         scenario.add_objects(copy.deepcopy(network))     # the planner may annotate its copy
         row_ids = _row_ids(scene, self.world, network)

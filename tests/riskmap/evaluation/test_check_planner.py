@@ -70,3 +70,59 @@ def test_the_contract_is_checked_on_recordings_too(capsys):
                                       for line in findings.lines()), findings.lines()
     assert main(["check-planner", "cv", "--commonroad", str(FIXTURES), "--quiet"]) == 0
     assert "keeps the planner contract" in capsys.readouterr().out
+
+
+class _Attached:
+    """Plans constant velocity; says whether the loop handed it the world (`attach`)."""
+
+    worlds: list = []
+
+    def __init__(self, seed: int = 0):
+        pass
+
+    def reset(self, scene) -> None:
+        pass
+
+    def attach(self, world) -> None:
+        _Attached.worlds.append(world)
+
+    def plan(self, scene) -> Plan:
+        speed = float(scene.ego_state()[4])
+        return Plan(np.stack([speed * 0.5 * np.arange(1, 13), np.zeros(12)], axis=1))
+
+
+def test_the_checked_planner_declares_through_the_checking_wrapper():
+    # what it declares (here `attach`) reaches the loop as in every other command
+    _Attached.worlds.clear()
+    findings = check_planner(f"py:{__name__}:_Attached", CheckConfig(envs=("highway-v0",), episode_s=1.0,
+                                                                     determinism_scenes=0))
+    assert not findings.counts and len(_Attached.worlds) == 1
+
+
+class _Stuck(_Attached):
+    """No solution at every other replan: within the contract."""
+
+    def __init__(self, seed: int = 0):
+        self.calls = 0
+
+    def plan(self, scene) -> Plan:
+        from riskmap.sim.plan import NoSolution
+
+        self.calls += 1
+        if self.calls % 2 == 0:
+            raise NoSolution("boxed in")
+        return super().plan(scene)
+
+
+def test_no_solution_is_counted_apart_not_as_a_breach():
+    findings = check_planner(f"py:{__name__}:_Stuck", CheckConfig(envs=("highway-v0",), episode_s=2.0))
+    assert not findings.counts, findings.lines()
+    assert findings.no_solution == 2 and "boxed in" in findings.no_solution_first
+
+
+def test_check_planner_prints_the_replans_without_a_solution(capsys):
+    assert main(["check-planner", f"py:{__name__}:_Stuck", "--envs", "highway-v0", "--seconds", "2",
+                 "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "2 of 4 replans without a solution (the ego braked), first on highway-v0" in out
+    assert "boxed in" in out and "keeps the planner contract" in out

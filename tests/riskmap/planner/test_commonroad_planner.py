@@ -80,9 +80,16 @@ def test_highway_drive_tracks_the_trajectory_with_stable_obstacle_ids():
     assert view.planning_problem.initial_state.time_step == view.time_step == 0
     obstacles = view.scenario.dynamic_obstacles
     assert obstacles and all(len(o.prediction.trajectory.state_list) == 60 for o in obstacles)
-    # the road's lanelets: the same ids at every replan
+    # the road's lanelets: the same ids at every replan, each of the road's 10 km straight lanes
+    # cut to the stretch around the scene (a few hundred metres), moving with the ego
     lanelet_ids = [sorted(l.lanelet_id for l in v.scenario.lanelet_network.lanelets) for _, v in views]
     assert lanelet_ids[0] and all(ids == lanelet_ids[0] for ids in lanelet_ids)
+    for _, v in (views[0], views[-1]):
+        ego_xy = np.asarray(v.planning_problem.initial_state.position)
+        for lanelet in v.scenario.lanelet_network.lanelets:
+            ends = lanelet.center_vertices[[0, -1]]
+            assert 100.0 < np.linalg.norm(ends[1] - ends[0]) < 1000.0
+            assert ends[0, 0] < ego_xy[0] < ends[1, 0]
     # one id, one vehicle: where an id is seen at consecutive replans it has moved by its speed
     for (_, a), (_, b) in zip(views, views[1:]):
         before = {o.obstacle_id: o.initial_state for o in a.scenario.dynamic_obstacles}
