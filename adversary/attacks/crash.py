@@ -35,6 +35,8 @@ without a collision, as in CRASH's own tables, and the report shows how many the
 
 from __future__ import annotations
 
+import hashlib
+import json
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -200,14 +202,66 @@ def crash_record(result: dict, scene_s: float, guard: dict | None = None) -> dic
         "timing": {**timing, "generation_seconds": result["generation"]["batch_seconds"]}}, plans)
 
 
-def _artifact(result: dict, panel: Path, recording: RecordingPlanner | None) -> bytes | None:
+# What an attacked job keeps for `adversary export` (adversary.export.campaign), in its artifact:
+# EXPORT_KEYS, every one prefixed "export__". attack_json: the attack record's small fields as
+# `adversary attack` writes them (scene, planner, selector, adversary row and log id, collision,
+# the judge's metrics) plus the scene's family; tracks / ego_states: its generated tracks and the
+# ego's drive (the record's rounded values); scene_sha1: `scene_digest` of the scene attacked,
+# which the exporter rebuilds from the scene (it is recorded again, not stored) and checks.
+EXPORT_KEYS = ("export__attack_json", "export__tracks", "export__ego_states", "export__scene_sha1")
+_EXPORT_FIELDS = ("scene", "planner", "selector", "status", "seed", "adversary_row", "adversary_log_id",
+                  "collision", "metrics")
+
+
+def scene_digest(record) -> str:
+    """SHA-1 of an attack scene's log (states, validity, sizes) and window rows: the exporter
+    checks that the scene it records again is the one the job attacked."""
+    digest = hashlib.sha1()
+    for array in (record.log.states, record.log.valid, record.log.sizes, record.agent_ids):
+        digest.update(np.ascontiguousarray(array).tobytes())
+    return digest.hexdigest()
+
+
+def export_arrays(result: dict, record) -> dict:
+    """The artifact arrays `adversary export` needs of an attacked job (EXPORT_KEYS above)."""
+    attack = {k: result[k] for k in _EXPORT_FIELDS if k in result}
+    attack["family"] = record.family
+    return {"export__attack_json": np.array(json.dumps(attack, sort_keys=True)),
+            "export__tracks": np.asarray(result["tracks"], dtype=np.float64),
+            "export__ego_states": np.asarray(result["ego_states"], dtype=np.float64),
+            "export__scene_sha1": np.array(scene_digest(record))}
+
+
+def rebuild_scene(attack: dict):
+    """The `SceneRecord` a job attacked, recorded again from `attack` (its export__attack_json):
+    a highway-env scene by driving the human again, a recorded one by cutting it from its
+    recording again, exactly as `crash_job` does. InputError if it cannot be."""
+    from adversary.crash.recorded import record_recorded_scene
+    from adversary.crash.scenes import AttackScene, record_attack_scene
+
+    try:
+        scene = AttackScene(**attack["scene"])
+    except (KeyError, TypeError) as err:
+        raise InputError(f"the job's export data names no scene ({err})") from None
+    if scene.recording:
+        if not Path(scene.recording).is_file():
+            raise InputError(f"recording {scene.recording} is not there; put it back (the job's scene was "
+                             "cut from it)")
+        return record_recorded_scene(scene, family=attack.get("family") or None)
+    return record_attack_scene(scene)
+
+
+def _artifact(result: dict, panel: Path, recording: RecordingPlanner | None, record=None) -> bytes | None:
     """npz bytes for the report: the attack's panel PNG (adversary.crash.panel) and, for an
-    attacked scene, the final drive as the episode attacks store theirs (frames, risk maps)."""
+    attacked scene, the final drive as the episode attacks store theirs (frames, risk maps) and
+    what `adversary export` needs (`export_arrays`; with the scene `record`)."""
     arrays = {}
     if panel.is_file():
         arrays["crash_panel_png"] = np.frombuffer(panel.read_bytes(), dtype=np.uint8)
     if result.get("final_scene") is not None:
         arrays.update(scene_arrays(result["final_scene"], result.get("adversary_xy"), recording))
+    if record is not None and result.get("status") == "ok":
+        arrays.update(export_arrays(result, record))
     return npz_bytes(arrays) if arrays else None
 
 
@@ -237,7 +291,7 @@ def crash_job(job) -> tuple[dict, bytes | None]:
         panel = Path(tmp) / "panel.png"
         [result] = attack_records([record], models, recording or planner, job.planner,
                                   params.attack_config(), [seed], [panel], keep_scenes=True)
-        artifact = _artifact(result, panel, recording)
+        artifact = _artifact(result, panel, recording, record)
     # The final drive was the attack's last rollout (module docstring): the guard holds its counts.
     guard = guard_counts(recording or planner) if result["status"] == "ok" else None
     return crash_record(result, scene.t0_s + scene.horizon_s, guard), artifact

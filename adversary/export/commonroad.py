@@ -413,9 +413,12 @@ def build_commonroad(run: AttackedRun) -> tuple:
     return scenario, problems, tags, sidecar
 
 
-def write_commonroad(attack: dict, record, out_dir: Path, name: str = "") -> tuple[Path, Path]:
+def write_commonroad(attack: dict, record, out_dir: Path, name: str = "",
+                     origin: dict | None = None) -> tuple[Path, Path]:
     """Write attack record `attack` on scene `record` as OUT_DIR/<name>.xml and its sidecar
-    OUT_DIR/<name>.json (module docstring); returns both paths. The sidecar is written last."""
+    OUT_DIR/<name>.json (module docstring); returns both paths. The sidecar is written last.
+    `origin`: where the attack comes from when not an `adversary attack` run (a campaign job:
+    {"campaign": DIR, "job_id": ID}), added to the sidecar's source and named in the XML's."""
     from rasterize.commonroad_compat import OverwriteExistingFile, XMLFileWriter
     from riskmap.infra.atomic import atomic_write, write_json
 
@@ -424,8 +427,11 @@ def write_commonroad(attack: dict, record, out_dir: Path, name: str = "") -> tup
     scenario, problems, tags, sidecar = build_commonroad(run)
     out_dir = Path(out_dir)
     xml, side = out_dir / f"{name}.xml", out_dir / f"{name}.json"
-    source = (f"adversary attack ({attack.get('planner')}, {attack.get('selector')}) on "
-              f"{record.scene.where}")
+    made_by = ("adversary attack" if not origin else
+               f"adversary stress-test {origin.get('campaign')} job {origin.get('job_id')}")
+    source = f"{made_by} ({attack.get('planner')}, {attack.get('selector')}) on {record.scene.where}"
+    if origin:
+        sidecar = {**sidecar, "source": {**sidecar["source"], **origin}}
     writer = XMLFileWriter(scenario, problems, AUTHOR, "", source, tags, decimal_precision=DECIMALS)
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / xml.name

@@ -183,7 +183,8 @@ def make_report(campaign_dir: Path, out_dir: Path | None = None) -> dict:
     report["pages"] = {j["job_id"]: j["page"] for j in jobs}
     write_json(out_dir / "report.json", report)
     env = _environment()
-    _write_job_pages(env, out_dir, records, media, {g["job_id"]: g for g in gallery}, gallery_count, names)
+    _write_job_pages(env, out_dir, records, media, {g["job_id"]: g for g in gallery}, gallery_count, names,
+                     campaign_dir)
     html = env.get_template("report.html.j2").render(
         r=report, gallery=gallery, jobs=jobs, attack_notes=attack_notes, collision_types=COLLISION_TYPES,
         config_json=json.dumps(meta["config"], indent=2))
@@ -197,8 +198,11 @@ def _named(record: dict, names: dict[str, str]) -> dict:
 
 
 def _write_job_pages(env, out_dir: Path, records: list[dict], media: dict, gallery: dict,
-                     gallery_count: int, names: dict[str, str]) -> None:
-    """OUT/jobs/JOB_ID.html for every job: its pictures and its record as stored."""
+                     gallery_count: int, names: dict[str, str], campaign_dir: Path) -> None:
+    """OUT/jobs/JOB_ID.html for every job: its pictures, its record as stored and, for a job
+    `adversary export` can write as a CommonRoad scenario, the command that does."""
+    from adversary.export.campaign import export_command
+
     template = env.get_template("job.html.j2")
     (out_dir / "jobs").mkdir(parents=True, exist_ok=True)
     for record in records:
@@ -213,5 +217,6 @@ def _write_job_pages(env, out_dir: Path, records: list[dict], media: dict, galle
                           if record.get("collided") else None),
             media=media[job_id], panel=entry and entry["panel"] and f"../{entry['panel']}",
             rank=entry and entry["title"].split(" ", 1)[0], gallery_count=gallery_count,
-            record_json=json.dumps(record, indent=2, sort_keys=True))
+            record_json=json.dumps(record, indent=2, sort_keys=True),
+            export_command=export_command(campaign_dir, record, campaign_dir / "artifacts" / f"{job_id}.npz"))
         atomic_write(out_dir / job_page(job_id), lambda f, html=html: f.write(html.encode()))

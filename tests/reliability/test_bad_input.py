@@ -1261,6 +1261,11 @@ add(
     export_row("format-unknown", AR(), S("--format"), format="opendrive", usage=True),
     export_row("run-scenes-missing", AR(), S("no_scenes")),    # its run.json names a missing folder
     export_row("scenes-flag-missing", AR(), S(missing("noscenes")), "--scenes", missing("noscenes")),
+    # a campaign directory (found by its store layout): a job it does not have; one natural job only
+    export_row("campaign-job-unknown", CAMPAIGN("good"), S("--job nope"), "--job", "nope",
+               watch=lambda fx, t: [fx.campaign_variant("good")]),
+    export_row("campaign-nothing-exportable", CAMPAIGN("good"), S("can be exported"),
+               watch=lambda fx, t: [fx.campaign_variant("good")]),
 )
 
 
