@@ -11,14 +11,13 @@ import pytest
 
 from adversary.cli import main
 from adversary.crash.attack import AttackConfig
-from adversary.crash.judge import COLLISION_IOU, braking_track, judge, rollout, splice_tracks
+from adversary.crash.judge import braking_track, first_collision, judge, rollout, splice_tracks
 from adversary.crash.recorded import recording_traffic
 from adversary.crash.run import record_commonroad_scenes, run_attacks
 from adversary.crash.scenes import AttackScene, load_record, record_attack_scene
 from adversary.export.commonroad import OBSTACLE_ID_OFFSET, write_commonroad
 from rasterize.commonroad_compat import XMLFileReader, XMLFileWriter, region_contains
 from riskmap.registry import cached_planner
-from riskmap.sim.metrics import box_iou
 
 FIXTURES = Path(__file__).resolve().parents[2] / "fixtures" / "commonroad"
 RECORDING = FIXTURES / "USA_US101-4_1_T-1.xml"     # as tests/adversary/crash/test_recorded_scenes.py
@@ -69,12 +68,12 @@ def _trajectory(obstacle, steps):
 
 
 def _first_collision(ego: np.ndarray, ego_size, other: np.ndarray, other_size) -> int | None:
-    """First row at which the boxes' IoU exceeds the judge's threshold (states [T, 6])."""
-    for k in range(len(ego)):
-        if np.isfinite(ego[k]).all() and np.isfinite(other[k]).all() \
-                and box_iou(ego[k], ego_size, other[k], other_size) > COLLISION_IOU:
-            return k
-    return None
+    """The judge's own collision test (`adversary.crash.judge.first_collision`) on the read-back
+    ego and adversary (states [T, 6]; a row is valid where it is finite): its first step."""
+    states = np.stack([ego, other])
+    valid = np.isfinite(states).all(axis=2)
+    step, _, _ = first_collision(np.nan_to_num(states), valid, np.array([ego_size, other_size], float), 0, [1])
+    return step
 
 
 def _states(xy, theta, speed):
