@@ -79,7 +79,8 @@ def _scene(traffic, vehicle: int) -> Scene:
 def _alone(scene: Scene) -> Scene:
     """The scene with every other vehicle taken out: an empty road."""
     return dataclasses.replace(scene, states=scene.states[:1], valid=scene.valid[:1],
-                               sizes=scene.sizes[:1], kinds=scene.kinds[:1])
+                               sizes=scene.sizes[:1], kinds=scene.kinds[:1],
+                               agent_ids=None if scene.agent_ids is None else scene.agent_ids[:1])
 
 
 def _with_leader(scene: Scene, lane: np.ndarray, ahead_m: float, speed: float) -> tuple[Scene, np.ndarray]:
