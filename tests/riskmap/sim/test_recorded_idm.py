@@ -97,7 +97,9 @@ def _with_leader(scene: Scene, lane: np.ndarray, ahead_m: float, speed: float) -
         alone, states=np.concatenate([alone.states, leader]),
         valid=np.concatenate([alone.valid, np.ones((1, len(times)), bool)]),
         sizes=np.concatenate([alone.sizes, [[4.5, 1.8]]]),
-        kinds=np.concatenate([alone.kinds, alone.kinds[:1]])), leader[0, scene.current_index]
+        kinds=np.concatenate([alone.kinds, alone.kinds[:1]]),
+        agent_ids=None if alone.agent_ids is None else np.append(alone.agent_ids, alone.agent_ids.max() + 1)
+    ), leader[0, scene.current_index]
 
 
 def _plan_world(planner, scene: Scene) -> tuple[np.ndarray, np.ndarray]:
