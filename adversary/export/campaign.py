@@ -114,7 +114,7 @@ def export_campaign(campaign_dir: Path, out: Path, fmt: str = "commonroad", only
     exported and what was skipped with why (module docstring). InputError when a named job is not
     the campaign's or when no job can be exported."""
     from adversary.attacks.crash import rebuild_scene, scene_digest
-    from adversary.export.commonroad import FORMATS, render_png, write_commonroad
+    from adversary.export.commonroad import FORMATS, add_exported, write_commonroad
     from riskmap.infra.atomic import write_json
     from riskmap.infra.rundir import claim_out_dir
 
@@ -168,11 +168,7 @@ def export_campaign(campaign_dir: Path, out: Path, fmt: str = "commonroad", only
                 continue
             write_commonroad(attack, scene, out, job_id,
                              origin={"campaign": str(campaign_dir), "job_id": job_id})
-        if plot:
-            entry["png"] = f"{job_id}.png"
-            if not (resume and (out / f"{job_id}.png").is_file()):
-                render_png(out / f"{job_id}.xml", out / f"{job_id}.png")
-        index["exported"].append(entry)
+        add_exported(entry, job_id, out, index, plot, resume)
         if progress:
             print(f"[{i + 1}/{len(todo)}] {job_id} -> {out / entry['xml']}", flush=True)
     write_json(out / "index.json", {**settings, **index})

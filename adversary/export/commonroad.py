@@ -494,6 +494,17 @@ def exported_collision_step(xml: Path) -> int | None:
 
 # ---- a picture -----------------------------------------------------------------------------------
 
+
+def add_exported(entry: dict, name: str, out: Path, index: dict, plot: bool, resume: bool) -> None:
+    """One exported scene into the export's index, drawn first with `--plot` (kept on `--resume`);
+    attack runs and campaigns alike."""
+    if plot:
+        entry["png"] = f"{name}.png"
+        if not (resume and (out / f"{name}.png").is_file()):
+            render_png(out / f"{name}.xml", out / f"{name}.png")
+    index["exported"].append(entry)
+
+
 def render_png(xml: Path, png: Path, time_step: int | None = None, radius_m: float = 60.0) -> int:
     """Draw an exported scene with commonroad-io's MPRenderer at `time_step` (default: the
     record's collision step, else 0): the lanelets, every obstacle (the adversary red), the ego's
@@ -674,11 +685,7 @@ def export_run(run_dir: Path, out: Path, fmt: str = "commonroad", only_failures:
         if not (resume and (out / f"{name}.json").is_file()):
             record = load_record(scenes_dir / f"{name}.npz")
             write_commonroad(attack, record, out, name)
-        if plot:
-            entry["png"] = f"{name}.png"
-            if not (resume and (out / f"{name}.png").is_file()):
-                render_png(out / f"{name}.xml", out / f"{name}.png")
-        index["exported"].append(entry)
+        add_exported(entry, name, out, index, plot, resume)
         if progress:
             print(f"[{i + 1}/{len(records)}] {name} -> {out / entry['xml']}", flush=True)
     write_json(out / "index.json", {**settings, **index})
