@@ -16,10 +16,10 @@ setup: $(STAMP)
 
 $(STAMP): pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
-	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet $(TORCH_PIN)
-	$(BIN)/python -m pip install --quiet -c constraints.txt -e '.[dev,commonroad,guard,ray]'
-	$(BIN)/python -m pip install --quiet --no-deps 'commonroad-io==2026.1'   # see pyproject.toml
+	$(BIN)/python -m pip install --quiet --no-cache-dir --upgrade pip
+	$(BIN)/python -m pip install --quiet --no-cache-dir $(TORCH_PIN)
+	$(BIN)/python -m pip install --quiet --no-cache-dir -c constraints.txt -e '.[dev,commonroad,guard,ray]'
+	$(BIN)/python -m pip install --quiet --no-cache-dir --no-deps 'commonroad-io==2026.1'   # see pyproject.toml
 	touch $(STAMP)
 
 test: $(STAMP)
@@ -50,7 +50,7 @@ CR_TESTS := tests/rasterize/test_commonroad_compat.py tests/rasterize/test_commo
 
 $(CR_OLDEST_DIR)/.installed: $(STAMP)
 	rm -rf $(CR_OLDEST_DIR)
-	$(BIN)/python -m pip install --quiet --no-deps --target $(CR_OLDEST_DIR) 'commonroad-io==$(CR_OLDEST)'
+	$(BIN)/python -m pip install --quiet --no-cache-dir --no-deps --target $(CR_OLDEST_DIR) 'commonroad-io==$(CR_OLDEST)'
 	touch $@
 
 test-commonroad-oldest: $(CR_OLDEST_DIR)/.installed
@@ -63,7 +63,7 @@ CR_IDM_DIR := $(VENV)/commonroad-idm
 
 $(CR_IDM_DIR)/.installed: $(STAMP) examples/commonroad_idm/requirements.txt
 	rm -rf $(CR_IDM_DIR)
-	$(BIN)/python -m pip install --quiet --no-deps --target $(CR_IDM_DIR) -r examples/commonroad_idm/requirements.txt
+	$(BIN)/python -m pip install --quiet --no-cache-dir --no-deps --target $(CR_IDM_DIR) -r examples/commonroad_idm/requirements.txt
 	touch $@
 
 test-commonroad-idm: $(CR_IDM_DIR)/.installed
