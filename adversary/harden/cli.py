@@ -66,6 +66,8 @@ HELP = {
                         "scenario that collided (default: CRASH's attacks only)",
     "search_pop": "evaluations per generation of a round's search",
     "search_gen": "generations of a round's search",
+    "search_share": "cap on the search windows' share of a round's attack windows (search shards dropped "
+                    "at random beyond it; default: no cap)",
 }
 
 

@@ -67,6 +67,35 @@ def natural_split(natural: Path, sidecar: dict) -> tuple[list[dict], list[dict]]
     return train, val
 
 
+SEARCH_SHARD_PREFIX = "search_"     # window shards made from search failures (loop.round_search_windows)
+
+
+def _shard_windows(shard: Path) -> int:
+    return int(json.loads(Path(shard).with_suffix(".json").read_text()).get("windows", 0))
+
+
+def cap_search_shards(shards: list[Path], search_share: float, seed: int) -> tuple[list[Path], dict]:
+    """Keep the search shards (named search_*) in a seeded random order while their windows stay
+    within `search_share` of all attack windows, i.e. at most search_share / (1 - search_share)
+    times the CRASH shards' windows; the CRASH shards are all kept. Returns the shards kept and
+    a summary of what was dropped."""
+    crash = [s for s in shards if not Path(s).name.startswith(SEARCH_SHARD_PREFIX)]
+    found = [s for s in shards if Path(s).name.startswith(SEARCH_SHARD_PREFIX)]
+    crash_windows = sum(_shard_windows(s) for s in crash)
+    allowed = math.floor(crash_windows * search_share / (1.0 - search_share) + 1e-9)
+    kept, kept_windows = [], 0
+    for i in np.random.default_rng(seed).permutation(len(found)):
+        windows = _shard_windows(found[int(i)])
+        if kept_windows + windows <= allowed:
+            kept.append(found[int(i)])
+            kept_windows += windows
+    kept_set = set(map(str, kept))
+    summary = {"search_share": search_share, "crash_windows": crash_windows,
+               "search_windows_found": sum(_shard_windows(s) for s in found), "search_windows_kept": kept_windows,
+               "search_shards_found": len(found), "search_shards_kept": len(kept)}
+    return crash + [s for s in found if str(s) in kept_set], summary
+
+
 def write_round_dataset(out: Path, natural: Path, sidecar: dict, attack_shards: list[Path],
                         natural_share: float, seed: int) -> dict:
     """Write the round's dataset under `out` (module docstring); returns its summary."""

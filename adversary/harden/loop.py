@@ -72,6 +72,10 @@ class HardenConfig:
     search_templates: tuple[str, ...] = ()   # NSGA-II templates searched each round; (): CRASH only
     search_pop: int = 12             # evaluations per generation of a round's search
     search_gen: int = 6              # its generations (budget pop × gen per template)
+    # Cap on the search windows' share of a round's attack windows (CRASH + search); None: no cap.
+    # A round's searches can find many more failures than CRASH (717 windows against 122 on
+    # highway), and a planner trained mostly on them learns to hang back.
+    search_share: float | None = None
     # Which epoch of a round's fine-tune becomes its planner: "last", or "best" by open-loop ADE on
     # the natural validation windows (the original's split). Fine-tuning on attack windows pulls
     # the planner away from ordinary driving epoch by epoch; "best" stops where natural driving
@@ -87,6 +91,8 @@ class HardenConfig:
                 raise InputError(f"--{name.replace('_', '-')} must be at least 1")
         if not 0.0 <= self.natural_share < 1.0:
             raise InputError(f"--natural-share {self.natural_share} must be in [0, 1)")
+        if self.search_share is not None and not 0.0 <= self.search_share < 1.0:
+            raise InputError(f"--search-share {self.search_share} must be in [0, 1)")
         if self.natural_env and self.natural_commonroad:
             raise InputError("--natural-env and --natural-commonroad: give one of them")
         from adversary.harden.windows import DEMONSTRATIONS
@@ -352,6 +358,8 @@ def _settings(config: HardenConfig) -> dict:
             settings.pop(name)
     if config.keep == "last":              # ... and those from before --keep
         settings.pop("keep")
+    if config.search_share is None:        # ... and those from before --search-share
+        settings.pop("search_share")
     return settings
 
 
@@ -402,9 +410,15 @@ def harden(config: HardenConfig, resume: bool = False, progress: bool = True) ->
         if config.search_templates:
             more, searched = round_search_windows(config, r, progress)
             shards += more
+        capped = {}
+        if config.search_share is not None:
+            from adversary.harden.dataset import cap_search_shards
+
+            shards, capped = cap_search_shards(shards, config.search_share, config.seed + r)
         tuned = fine_tune(config, r, shards, progress)
         commit({"round": r, "planner": planner_spec(config, r), "training_attack": trained,
-                **({"training_search": searched} if searched else {}), **tuned,
+                **({"training_search": searched} if searched else {}),
+                **({"search_cap": capped} if capped else {}), **tuned,
                 "judged": judge_round(config, r, progress)})
     return summary
 

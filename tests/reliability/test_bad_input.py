@@ -1238,6 +1238,7 @@ add(
     harden_row("natural-missing", S(missing("nodata")), natural=missing("nodata")),
     harden_row("natural-other-raster", S(ds()), checkpoint="checkpoints/riskmap_highway"),
     harden_row("natural-share-one", S("--natural-share"), extra=("--natural-share", "1")),
+    harden_row("search-share-one", S("--search-share"), extra=("--search-share", "1")),
     harden_row("natural-env-unknown", S("nope-v0"), extra=("--natural-env", "nope-v0")),
     harden_row("scenes-missing", S(missing("noscenes")), scenes=missing("noscenes")),
     harden_row("count-too-many", S("--count"), extra=("--count", "5")),

@@ -250,9 +250,30 @@ def test_the_round_planner_samples_and_plans_as_the_original():
     assert side["planning"] == {"goal_variance": 2.0} and side["epoch"] == 2 and side["hardening"] == {"round": 1}
 
 
+def test_search_shards_are_capped_to_their_share_of_the_attack_windows(tmp_path):
+    from adversary.harden.dataset import cap_search_shards
+
+    def shard(name, windows):
+        (tmp_path / f"{name}.json").write_text(json.dumps({"windows": windows}))
+        return tmp_path / name
+
+    crash = [shard("scene_00001", 6), shard("scene_00002", 4)]
+    found = [shard(f"search_cut_in_{k:04d}", 3) for k in range(10)]
+    kept, summary = cap_search_shards(crash + found, search_share=0.5, seed=0)
+    assert kept[:2] == crash                                  # every CRASH shard stays, first
+    assert summary["search_windows_kept"] == 9 == 3 * (len(kept) - 2)   # ≤ 10 CRASH windows, in whole shards
+    assert summary["search_windows_found"] == 30 and summary["crash_windows"] == 10
+    assert cap_search_shards(crash + found, search_share=0.5, seed=0)[0] == kept      # seeded
+    assert cap_search_shards(crash + found, search_share=0.0, seed=0)[0] == crash
+    everything, _ = cap_search_shards(crash + found, search_share=0.75, seed=0)
+    assert len(everything) == 2 + 10                          # 30 ≤ 3 × 10 windows: nothing dropped
+
+
 def test_bad_settings_are_one_line_errors(tmp_path, capsys):
     with pytest.raises(InputError, match="natural-share"):
         HardenConfig("c", "s", "n", "o", natural_share=1.0)
+    with pytest.raises(InputError, match="search-share"):
+        HardenConfig("c", "s", "n", "o", search_share=1.0)
     with pytest.raises(InputError, match="--rounds"):
         HardenConfig("c", "s", "n", "o", rounds=0)
     with pytest.raises(InputError, match="--demonstration 'boldest'"):
