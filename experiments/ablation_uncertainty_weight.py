@@ -24,7 +24,7 @@ from riskmap.evaluation.drive import drive
 from riskmap.evaluation.open_loop import evaluate
 from riskmap.figures.ablation import print_row, pyplot, save_figure, write_table
 from riskmap.infra.atomic import write_json
-from riskmap.sim.rollout import DriveConfig
+from riskmap.sim.worlds.highway_drive import DriveConfig
 
 
 def main() -> None:

@@ -1,7 +1,7 @@
 """Closed-loop driving speed: wall seconds per simulated second, highway-env's road plain and fast.
 
 Every episode is driven twice in one process, once on an env made with `make_env(fast=False)`
-(highway-env's own `Road`) and once with `fast=True` (`riskmap.sim.fast_road`), alternating
+(highway-env's own `Road`) and once with `fast=True` (`riskmap.sim.worlds.fast_road`), alternating
 which goes first, so that a loaded machine slows both alike. The whole `drive_episode` is timed:
 reset, every step, recording, measurements and, with a planner, planning. Medians over the
 episodes of wall seconds (and process CPU seconds) per simulated second; the ratio is plain over
@@ -23,8 +23,8 @@ from pathlib import Path
 
 from riskmap.planner.shipped import shipped_spec
 from riskmap.registry import make_planner
-from riskmap.sim.episode import make_env
-from riskmap.sim.rollout import DriveConfig, drive_episode
+from riskmap.sim.worlds.episode import make_env
+from riskmap.sim.worlds.highway_drive import DriveConfig, drive_episode
 
 ENVS = ("highway-v0", "intersection-v0")
 SAME = ("simulated_s", "distance_m", "collided", "off_road", "min_gap_m", "mean_speed_mps")

@@ -22,9 +22,9 @@ from riskmap.guard.guarded import GUARD_CHECKPOINT, GuardConfig, obstacle_ahead,
 from riskmap.guard.predictor import AccidentPredictor
 from riskmap.guard.system2 import DecelerationAgent
 from riskmap.infra.atomic import write_json
-from riskmap.sim.episode import make_env
-from riskmap.sim.plan import HumanDriver
-from riskmap.sim.rollout import DriveConfig, drive_episode
+from riskmap.sim.loop.plan import HumanDriver
+from riskmap.sim.worlds.episode import make_env
+from riskmap.sim.worlds.highway_drive import DriveConfig, drive_episode
 
 
 class _SceneTap(HumanDriver):

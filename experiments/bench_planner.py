@@ -35,7 +35,7 @@ from riskmap.infra.checkpoint import load_weights
 from riskmap.planner.model import ModelConfig, RiskMapGenerator
 from riskmap.planner.riskmap_planner import RiskMapPlanner
 from riskmap.planner.vi import soft_value_iteration
-from riskmap.sim.episode import Episode, make_env
+from riskmap.sim.worlds.episode import Episode, make_env
 
 STAGES = ("raster", "network", "vi", "svf", "sampler", "total")
 

@@ -17,12 +17,12 @@ import numpy as np
 from rasterize.frames import ego_from_world, heading_angle
 from riskmap.evaluation.sources import EnvSource
 from riskmap.registry import cached_planner
-from riskmap.sim.episode import cached_env
-from riskmap.sim.log_replay import HumanLog, LogReplayEpisode
+from riskmap.sim.worlds.episode import cached_env
+from riskmap.sim.worlds.log_replay import HumanLog, LogReplayEpisode
 
 
 def collision_side(out: Path, spec: str, episode: int) -> dict:
-    from riskmap.sim.rollout import DriveConfig, drive_episode
+    from riskmap.sim.worlds.highway_drive import DriveConfig, drive_episode
 
     meta = json.loads((out / "run.json").read_text())["config"]
     config = EnvSource(meta["env_id"], meta["episodes"], meta["seed"], meta["mode"], episode_s=meta["episode_s"])

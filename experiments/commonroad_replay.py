@@ -2,7 +2,7 @@
 
 Every vehicle that `riskmap collect --from-commonroad` makes a demonstrator is handed over to
 each planner 2 s into its record and driven to the end of its record among the replayed traffic
-(`riskmap.sim.commonroad_replay`). Planners: `replay` (the log itself, tracked by the controller:
+(`riskmap.sim.worlds.commonroad_replay`). Planners: `replay` (the log itself, tracked by the controller:
 the harness's own error floor), `cv`, `riskmap:PATH`, and `finetuned:RUNS` (for each vehicle
 the fold checkpoint of experiments/commonroad_finetune.py that held that vehicle out).
 
@@ -23,7 +23,7 @@ from rasterize.commonroad.tracks import RecordedTraffic
 from riskmap.data.collect_commonroad import CommonRoadCollectConfig, demonstrators, scenario_files
 from riskmap.infra.atomic import write_json
 from riskmap.registry import make_planner
-from riskmap.sim.commonroad_replay import RecordedFuturePlanner, replay_commonroad_episode
+from riskmap.sim.worlds.commonroad_replay import RecordedFuturePlanner, replay_commonroad_episode
 
 
 def _planner(spec: str, traffic: RecordedTraffic, vehicle_id: int, episode: int, folds: int):

@@ -1,7 +1,7 @@
 """The failures that count among CRASH's wins: one row per attack run, and the floor scenes.
 
 Reads `adversary attack` runs (OUT/attacks/*.json, each collision classified by
-`riskmap.sim.failures` in the judge) and writes PREFIX.md and PREFIX.json: per run the wins
+`riskmap.sim.records.failures` in the judge) and writes PREFIX.md and PREFIX.json: per run the wins
 (collisions with the adversary) over the scenes, how many are valid attacks, avoidable, at fault
 / struck from behind / side, and how many count (valid, avoidable and at fault), with the valid
 and counted shares of the wins; then, for the scenes named by `--floor` (those every planner
@@ -25,7 +25,7 @@ import json
 from pathlib import Path
 
 from riskmap.infra.atomic import atomic_write, write_json
-from riskmap.sim.failures import HIGHWAY_ENV_LIMITS, revalidated, summarise_failures
+from riskmap.sim.records.failures import HIGHWAY_ENV_LIMITS, revalidated, summarise_failures
 
 
 def load_run(run: Path) -> list[dict]:
@@ -44,9 +44,10 @@ def simulator_limits(episodes: int) -> dict:
     import numpy as np
 
     from riskmap.registry import make_planner
-    from riskmap.sim.episode import make_env
-    from riskmap.sim.failures import adversary_kinematics
-    from riskmap.sim.rollout import DriveConfig, DriveHooks, drive_episode
+    from riskmap.sim.loop.rollout import DriveHooks
+    from riskmap.sim.records.failures import adversary_kinematics
+    from riskmap.sim.worlds.episode import make_env
+    from riskmap.sim.worlds.highway_drive import DriveConfig, drive_episode
 
     env = make_env("highway-v0", 10)
     values: dict[str, list[float]] = {}

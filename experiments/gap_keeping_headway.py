@@ -25,7 +25,7 @@ def _episode(task: tuple) -> dict:
     from riskmap.evaluation.sources import recorded_traffic
     from riskmap.planner import gap_keeping
     from riskmap.planner.riskmap_planner import RiskMapPlanner
-    from riskmap.sim.commonroad_replay import ReplayConfig, replay_commonroad_episode
+    from riskmap.sim.worlds.commonroad_replay import ReplayConfig, replay_commonroad_episode
 
     torch.set_num_threads(1)
     checkpoint, goal_variance, headway, path, vehicle = task

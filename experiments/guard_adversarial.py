@@ -54,7 +54,7 @@ def anyspeed_guard(inner_spec: str, seed: int, checkpoint: str = ""):
     from riskmap.guard.predictor import AccidentPredictor
     from riskmap.guard.system2 import DecelerationAgent
     from riskmap.registry import make_planner
-    from riskmap.sim.plan import drives_itself
+    from riskmap.sim.loop.plan import drives_itself
 
     families = GuardConfig().speed_threshold_mps
     config = GuardConfig(trigger="tgat", speed_threshold_mps={family: 0.0 for family in families},

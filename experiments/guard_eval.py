@@ -6,7 +6,7 @@ driven by a planner alone, with the deceleration plan always on at high speed
 (`guard-always:SPEC`), and with the TGAT-triggered plan (`guard:SPEC`). Reported per cell:
 collision rate, progress (distance, mean speed), decision frames, interventions and the BDI
 intervention ratio (share of decision frames that System 2 took over), System 1 / System 2 ms;
-each collision's class (`riskmap.sim.failures`: at fault, avoidable, and for the aggressor's a
+each collision's class (`riskmap.sim.records.failures`: at fault, avoidable, and for the aggressor's a
 valid attack) and how many count.
 
     .venv/bin/python experiments/guard_eval.py --out out/guard_eval --episodes 8 --seed 100 \
@@ -30,9 +30,10 @@ from riskmap.infra.atomic import write_json
 from riskmap.infra.stats import wilson
 from riskmap.planner.shipped import shipped_spec
 from riskmap.registry import make_planner
-from riskmap.sim.failures import classify_run, summarise_failures
-from riskmap.sim.episode import make_env
-from riskmap.sim.rollout import DriveConfig, DriveHooks, drive_episode
+from riskmap.sim.loop.rollout import DriveHooks
+from riskmap.sim.records.failures import classify_run, summarise_failures
+from riskmap.sim.worlds.episode import make_env
+from riskmap.sim.worlds.highway_drive import DriveConfig, drive_episode
 
 VARIANT_PREFIX = {"alone": "", "always": "guard-always:", "tgat": "guard:"}
 EPISODE_S = {"highway-v0": 20.0, "intersection-v0": 16.0}
@@ -70,7 +71,7 @@ def run_cell(out: Path, env_id: str, scene: str, inner: str, variant: str, episo
         driven = {}
         record = drive_episode(env, planner, config, episode,
                                hooks=DriveHooks(on_ready=hooks, on_step=lambda run: driven.update(run=run)))
-        if record["collided"] and "run" in driven:       # the collision's class (riskmap.sim.failures)
+        if record["collided"] and "run" in driven:       # the collision's class (riskmap.sim.records.failures)
             record["failure"] = classify_run(driven["run"], hooks[0].aggressor if hooks else None)
         guard = getattr(planner, "guard", None)
         record.update({"spec": spec + (f" ({option})" if option else ""), "scene": scene, "variant": variant, "inner": inner,
@@ -97,7 +98,7 @@ def summarise(out: Path) -> list[dict]:
             "collisions": int(sum(r["collided"] for r in records)),
             "collision_ci": wilson(int(sum(r["collided"] for r in records)), len(records)), "hard": hard,
             "collision_rate": float(np.mean([r["collided"] for r in records])),
-            # valid, avoidable, at fault (riskmap.sim.failures); records from before: unknown
+            # valid, avoidable, at fault (riskmap.sim.records.failures); records from before: unknown
             "failures": summarise_failures([r.get("failure") for r in records if r["collided"]], len(records)),
             "distance_m": float(np.mean([r["distance_m"] for r in records])),
             "mean_speed_mps": float(np.mean([r["mean_speed_mps"] for r in records])),

@@ -46,7 +46,7 @@ def search_rows(label: str, root: Path) -> list[dict]:
         s = json.loads(summary.read_text())
         cfg = s["config"]
         ci = wilson(s["collisions"], s["evaluations"])
-        # failures that count (valid, avoidable, at fault: riskmap.sim.failures); searches
+        # failures that count (valid, avoidable, at fault: riskmap.sim.records.failures); searches
         # written before the classification have none
         counted = (s.get("failures") or {}).get("counted")
         counted_ci = wilson(counted, s["evaluations"]) if counted is not None else None

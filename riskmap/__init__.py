@@ -3,12 +3,12 @@ training, sampler, planner and closed-loop driving. Heavy modules (torch) load o
 
 # name: the module that defines it (tests/riskmap/test_public_names.py imports every one)
 _LAZY = {
-    "Plan": "riskmap.sim.plan", "Planner": "riskmap.sim.plan", "PLAN_STEPS": "riskmap.sim.plan",
-    "PLAN_DT_S": "riskmap.sim.plan",
+    "Plan": "riskmap.sim.loop.plan", "Planner": "riskmap.sim.loop.plan", "PLAN_STEPS": "riskmap.sim.loop.plan",
+    "PLAN_DT_S": "riskmap.sim.loop.plan", "NoSolution": "riskmap.sim.loop.plan",
     "RiskMapPlanner": "riskmap.planner.riskmap_planner", "load_planner": "riskmap.planner.riskmap_planner",
     "SpaceTimePlanner": "riskmap.planner.st_planner",
     "DemoDataset": "riskmap.data.dataset", "make_planner": "riskmap.registry",
-    "make_env": "riskmap.sim.episode", "drive_episode": "riskmap.sim.rollout",
+    "make_env": "riskmap.sim.worlds.episode", "drive_episode": "riskmap.sim.worlds.highway_drive",
     "soft_value_iteration": "riskmap.planner.vi", "state_visitation": "riskmap.planner.vi",
 }
 

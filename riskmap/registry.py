@@ -4,7 +4,7 @@ Built in:
 
     idm              the IDM/MOBIL "human": the ego drives itself, no plan is made
     yielding         IDM/MOBIL that gives way at conflict zones by gap acceptance (the
-                     intersection teacher, `riskmap.sim.yielding`)
+                     intersection teacher, `riskmap.sim.drivers.yielding`)
     cv               constant velocity: current speed and heading for 6 s
     riskmap:PATH     the risk-map planner from a checkpoint (PATH with or without .safetensors)
     guard:SPEC       SPEC wrapped in the neuro-symbolic guard, TGAT-triggered (`guarded:` too)
@@ -37,7 +37,7 @@ written, a checkpoint's file stem for `riskmap:`/`cnn:`/`cnn_lstm:`/`rvsg:`, the
 that would share a name are told apart by `-2`, `-3`, ... (`display_names`). Records keep the
 whole SPEC beside the name.
 
-Either must return a planner (`riskmap.sim.plan.Planner`: `reset(scene)`, `plan(scene) -> Plan`,
+Either must return a planner (`riskmap.sim.loop.plan.Planner`: `reset(scene)`, `plan(scene) -> Plan`,
 or `drives_itself = True`); anything else is a one-line error naming the SPEC. The guard is an
 entry-point plug-in (`guard`, `guarded`, `guard-always`, declared in pyproject.toml): it wraps a
 planner made by this registry, so it sits above it and the registry never imports it.
@@ -46,7 +46,7 @@ planner made by this registry, so it sits above it and the registry never import
 from __future__ import annotations
 
 from rasterize.errors import InputError
-from riskmap.sim.plan import HumanDriver, traits_of
+from riskmap.sim.loop.plan import HumanDriver, traits_of
 
 PLUGIN_GROUP = "riskmap.planners"
 SPECS = ("idm", "yielding", "cv", "replay", "riskmap:PATH", "cnn:PATH", "cnn_lstm:PATH", "rvsg:PATH",
@@ -75,7 +75,7 @@ def make_planner(spec: str, seed: int = 0, goal_variance: float | None = None):
     if kind == "idm" and not arg:
         return HumanDriver()
     if kind == "yielding" and not arg:
-        from riskmap.sim.yielding import demonstrator
+        from riskmap.sim.drivers.yielding import demonstrator
 
         return demonstrator("yielding")
     if kind == "cv" and not arg:
@@ -87,7 +87,7 @@ def make_planner(spec: str, seed: int = 0, goal_variance: float | None = None):
 
         return load_planner(arg, seed=seed, goal_variance=goal_variance)
     if kind == "replay" and not arg:
-        from riskmap.sim.log_replay import ReplayPlanner
+        from riskmap.sim.worlds.log_replay import ReplayPlanner
 
         return ReplayPlanner()
     if kind in ("cnn", "cnn_lstm", "cnn-lstm", "rvsg") and arg:

@@ -8,7 +8,7 @@ import time
 import numpy as np
 
 from rasterize.frames import ego_pose
-from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, Plan
+from riskmap.sim.loop.plan import PLAN_DT_S, PLAN_STEPS, Plan
 
 FAULTS = ("none", "world_frame", "kmh", "nan", "shape", "raise", "unseeded", "slow", "not_a_plan",
           "swapped_axes")

@@ -1,13 +1,13 @@
 """`aggressive_neighbour`: one neighbour of the ego turns into an aggressive driver aimed at it.
 
-The driver, its parameters and the selection rule are riskmap.sim.aggressive's (the one scripted
+The driver, its parameters and the selection rule are riskmap.sim.drivers.aggressive's (the one scripted
 aggressive driver, shared with the guard's scenes); this module makes it a campaign attack.
 """
 
 from __future__ import annotations
 
 from adversary.attacks.base import AttackEntry
-from riskmap.sim.aggressive import AggressiveParams, install_aggressive_neighbour
+from riskmap.sim.drivers.aggressive import AggressiveParams, install_aggressive_neighbour
 
 
 class AggressiveNeighbour:

@@ -1,13 +1,13 @@
 """The attack interface of stress-test campaigns: what an attack is and how a job runs it.
 
-An attack perturbs one closed-loop episode (riskmap.sim.rollout.drive_episode) through two hooks:
+An attack perturbs one closed-loop episode (riskmap.sim.worlds.highway_drive.drive_episode) through two hooks:
 
     start(run)   once, after the episode is reset and before the ego is handed to the planner:
                  pick an adversary, replace its driver, change the scenario ...
     step(run)    after every simulation step (0.1 s): steer the adversary, log what it needs.
 
 and tells the campaign which vehicle it made the adversary (`adversary`, a highway-env vehicle,
-or None when the attack has no single adversary). `run` is a `riskmap.sim.episode.Episode`.
+or None when the attack has no single adversary). `run` is a `riskmap.sim.worlds.episode.Episode`.
 An attack may also define `extra() -> dict` (JSON-ready) to put its own numbers in the record
 as `attack_extra`; the report reads `generations` ([{"evaluations": n, "collisions": k}, ...]),
 `pareto_front` ([[f1, f2, ...], ...]) and `objective_names` from search attacks.

@@ -59,10 +59,10 @@ from rasterize.errors import InputError
 from rasterize.timebase import HISTORY_S, PLAN_DT_S
 from riskmap.infra.config_mapping import require
 from riskmap.registry import cached_planner
-from riskmap.sim.metrics import coarse_collision_name
-from riskmap.sim.plan import drives_itself
-from riskmap.sim.plan_checks import ImplausiblePlans
-from riskmap.sim.record import EpisodeRecord, current_names
+from riskmap.sim.loop.plan import drives_itself
+from riskmap.sim.loop.plan_checks import ImplausiblePlans
+from riskmap.sim.records.metrics import coarse_collision_name
+from riskmap.sim.records.record import EpisodeRecord, current_names
 
 # CRASH's SELECTORS (adversary.crash.selection), spelt out so that reading a config does not
 # import torch; tests/adversary/test_crash_attack.py checks the two agree.

@@ -19,8 +19,8 @@ import numpy as np
 
 from adversary.attacks.monitor import EpisodeMonitor
 from riskmap.registry import cached_planner
-from riskmap.sim.plan import drives_itself, traits_of
-from riskmap.sim.record import EpisodeRecord
+from riskmap.sim.loop.plan import drives_itself, traits_of
+from riskmap.sim.records.record import EpisodeRecord
 
 # The guard's counts of one driven episode in a job record (None: no guard drove the ego).
 GUARD_FIELDS = ("guard_frames", "guard_interventions", "guard_hard")
@@ -160,8 +160,8 @@ def job_fields(record: EpisodeRecord) -> dict:
 def record_of(episode: dict, monitor: EpisodeMonitor, extra: dict, planner=None) -> dict:
     """The job's measurements from one driven episode (`drive_episode`'s record) and its monitor;
     `planner`: what drove it, read right after the drive for its guard's counts (`guard_counts`)."""
-    from riskmap.sim.alternatives import ego_only_solution
-    from riskmap.sim.failures import classify_run
+    from riskmap.sim.records.alternatives import ego_only_solution
+    from riskmap.sim.records.failures import classify_run
 
     solution = failure = None
     if episode["collided"] and monitor.collision_step is not None:
@@ -186,8 +186,9 @@ def record_of(episode: dict, monitor: EpisodeMonitor, extra: dict, planner=None)
 def drive_with_hooks(job, factory) -> tuple[dict, bytes]:
     """Drive the job's scene with the hooks `factory(params, seed)` makes (categories baseline,
     rule)."""
-    from riskmap.sim.episode import cached_env
-    from riskmap.sim.rollout import DriveConfig, DriveHooks, drive_episode
+    from riskmap.sim.loop.rollout import DriveHooks
+    from riskmap.sim.worlds.episode import cached_env
+    from riskmap.sim.worlds.highway_drive import DriveConfig, drive_episode
 
     config = DriveConfig(job.env_id, episodes=job.episode + 1, seed=job.scene_seed,
                          control_hz=job.budget.control_hz, replan_hz=job.budget.replan_hz,

@@ -6,13 +6,13 @@ Definitions (STRIVE's metrics as CRASH uses them, adapted to highway-env):
 - collision: highway-env's own crash flag on the ego (its boxes intersect). The partner is the
   nearest other vehicle that highway-env flagged as crashed at that step (else the nearest one).
 - kinematic value: |v_ego - v_partner| (m/s, velocity vectors) at the collision step.
-- collision type: `riskmap.sim.metrics.coarse_collision_type` (head-on, rear-end either way,
+- collision type: `riskmap.sim.records.metrics.coarse_collision_type` (head-on, rear-end either way,
   sideswipe, side (angle), from the relative heading and the partner's place in the ego's frame).
-- off-road: `riskmap.sim.metrics.centre_off_lane`: a vehicle's centre more than
+- off-road: `riskmap.sim.records.metrics.centre_off_lane`: a vehicle's centre more than
   `off_road_margin_m` outside every lane of the network, checked once a simulated second for the
   adversary and for the other vehicles within `radius_m` of the ego, up to the collision (later
   off-road moves are consequences).
-- Safety %: `riskmap.sim.metrics.closing_dangerous_encounters` with `ClosingSafetyConfig` (the
+- Safety %: `riskmap.sim.records.metrics.closing_dangerous_encounters` with `ClosingSafetyConfig` (the
   campaign reading: box gap under `close_gap_m`, or gap / closing speed under `ttc_s`, for every
   vehicle within `radius_m`), at 2 Hz, the planner paper's step.
 """
@@ -21,10 +21,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from riskmap.sim.metrics import ClosingSafetyConfig as SafetyConfig
-from riskmap.sim.metrics import centre_off_lane as off_network
-from riskmap.sim.metrics import closing_dangerous_encounters, safety_pct
-from riskmap.sim.metrics import coarse_collision_type as collision_type
+from riskmap.sim.records.metrics import ClosingSafetyConfig as SafetyConfig
+from riskmap.sim.records.metrics import centre_off_lane as off_network
+from riskmap.sim.records.metrics import closing_dangerous_encounters, safety_pct
+from riskmap.sim.records.metrics import coarse_collision_type as collision_type
 
 # The names campaigns and their tests import from here.
 __all__ = ["EpisodeMonitor", "SafetyConfig", "collision_type", "off_network"]

@@ -211,7 +211,7 @@ def _vehicle(state: np.ndarray, size: np.ndarray) -> SimpleNamespace:
 def _encounters(result, contact_step: int | None, safety, every: int) -> tuple[int, int]:
     """(dangerous encounters, encounters) at every `every`-th step after t0 before the first
     contact, as `EpisodeMonitor` counts them."""
-    from riskmap.sim.metrics import closing_dangerous_encounters
+    from riskmap.sim.records.metrics import closing_dangerous_encounters
 
     ego, s, v = result.ego, result.states, result.valid
     last = int(np.flatnonzero(v[ego])[-1])
@@ -235,9 +235,9 @@ def natural_record(result, scene: RecordedScene, safety, driver: str | None = No
     which the failure classification may change lanes (none: it only brakes or speeds up)."""
     from adversary.attacks.episode import GUARD_FIELDS, job_fields
     from adversary.crash.recorded import recording_traffic
-    from riskmap.sim.alternatives import ego_only_solution
-    from riskmap.sim.metrics import coarse_collision_type, safety_pct
-    from riskmap.sim.record import EpisodeRecord
+    from riskmap.sim.records.alternatives import ego_only_solution
+    from riskmap.sim.records.metrics import coarse_collision_type, safety_pct
+    from riskmap.sim.records.record import EpisodeRecord
 
     drive = EpisodeRecord.from_dict(result.drive)
     contact = drive.extra.get("contact")
@@ -268,10 +268,10 @@ def natural_record(result, scene: RecordedScene, safety, driver: str | None = No
 
 
 def classify_recorded_collision(result, partner: int, step: int, lanes=()) -> dict:
-    """`riskmap.sim.failures.classify_failure` of a natural drive's contact on a recording (no
+    """`riskmap.sim.records.failures.classify_failure` of a natural drive's contact on a recording (no
     attack to validate); with `lanes`, lane changes that keep the box on them count too."""
-    from riskmap.sim.failures import classify_failure
-    from riskmap.sim.metrics import box_off_road, drivable_area
+    from riskmap.sim.records.failures import classify_failure
+    from riskmap.sim.records.metrics import box_off_road, drivable_area
 
     on_road, lane_m = None, None
     if lanes:
@@ -290,7 +290,7 @@ def natural_recorded_job(job) -> tuple[dict, bytes]:
     from adversary.attacks.episode import RecordingPlanner, clear_guard, guard_counts, npz_bytes, scene_arrays
     from adversary.crash.judge import rollout
     from riskmap.registry import cached_planner
-    from riskmap.sim.plan import drives_itself
+    from riskmap.sim.loop.plan import drives_itself
 
     record = scene_record(job.scene)
     planner = cached_planner(job.planner, job.planner_seed)

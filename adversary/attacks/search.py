@@ -28,7 +28,7 @@ from adversary.attacks.episode import RecordingPlanner, artifact_of, clear_guard
 from adversary.attacks.monitor import EpisodeMonitor
 from adversary.search.scenarios import ENV_ID, TEMPLATES
 from riskmap.infra.config_mapping import require
-from riskmap.sim.plan import drives_itself
+from riskmap.sim.loop.plan import drives_itself
 
 SEARCH_ATTACKS = {"nsga2_search": "nsga2", "random_search": "random"}   # attack -> algorithm
 SEARCH_ENV_ID = ENV_ID                 # the only env a template builds its road in

@@ -13,7 +13,7 @@
 The record of one attack is JSON-ready: the scene, selector, p over the window rows, the
 adversary, the generated tracks, the metrics, where the time went, and the plans that failed the
 planner contract's checks over every drive of the scene (`implausible_plans`, with the first
-one's problems; `riskmap.sim.plan_checks`: driven as made, counted).
+one's problems; `riskmap.sim.loop.plan_checks`: driven as made, counted).
 """
 
 from __future__ import annotations
@@ -39,9 +39,8 @@ from adversary.crash.selection import (
 from adversary.crash.traffic_model import states_of
 from rasterize.errors import InputError
 from rasterize.timebase import REPLAN_HZ
-from riskmap.sim.plan_checks import ImplausiblePlans
-from riskmap.sim.rollout import check_replan_hz
-
+from riskmap.sim.loop.plan_checks import ImplausiblePlans
+from riskmap.sim.loop.rollout import check_replan_hz
 
 # The validity terms' weights: the adversary-other overlap weighs as STRIVE's non-adversary
 # collisions (20 per metre of disc overlap); the kinematic excess 5 per squared unit, so that

@@ -18,7 +18,7 @@ Eq. 8 leaves the adversary's overlaps with the other agents out, so an adversary
 traffic on its way to the ego, and nothing keeps it within a car's limits. The two validity
 terms (off, weight 0, for the paper's reproduction; on in `AttackConfig` by default) add the
 adversary-other pairs to the collision penalty and `kinematic_excess`: how far the adversary's
-2 Hz track exceeds the limits a valid attack keeps (`riskmap.sim.failures`).
+2 Hz track exceeds the limits a valid attack keeps (`riskmap.sim.records.failures`).
 
 The ego is never decoded: its states are fixed to `ego_future` (the logged one for a replayed
 ego). For a closed-loop ego, `replan(tracks) -> ego_future` re-runs the black-box planner on the
@@ -122,13 +122,19 @@ STEP_S = PLAN_DT_S                    # the decoded tracks' step (0.5 s, 2 Hz)
 
 
 def kinematic_excess(traj: torch.Tensor) -> torch.Tensor:
-    """[B, N] squared excess over the valid-attack limits (`riskmap.sim.failures`), summed over
+    """[B, N] squared excess over the valid-attack limits (`riskmap.sim.records.failures`), summed over
     the steps of tracks [B, N, F, 4] (x, y, heading rad, speed m/s at 2 Hz): longitudinal
     acceleration beyond -MAX_BRAKE / +MAX_ACCEL (m/s²), |yaw rate| beyond MAX_YAW_RATE (rad/s),
     |lateral acceleration| = speed * |yaw rate| beyond MAX_LATERAL_ACCEL (m/s²), and speed across
     the track's mean heading beyond MAX_LANES_PER_S lane widths per second (m/s)."""
-    from riskmap.sim.failures import LANE_WIDTH_M, MAX_ACCEL_MPS2, MAX_BRAKE_MPS2, MAX_LANES_PER_S, \
-        MAX_LATERAL_ACCEL_MPS2, MAX_YAW_RATE_RADPS
+    from riskmap.sim.records.failures import (
+        LANE_WIDTH_M,
+        MAX_ACCEL_MPS2,
+        MAX_BRAKE_MPS2,
+        MAX_LANES_PER_S,
+        MAX_LATERAL_ACCEL_MPS2,
+        MAX_YAW_RATE_RADPS,
+    )
 
     speed, heading = traj[..., 3], traj[..., 2]
     accel = (speed[..., 1:] - speed[..., :-1]) / STEP_S

@@ -12,8 +12,8 @@ from dataclasses import dataclass
 
 from adversary.crash.scenes import WINDOW_DT_S, SceneRecord
 from rasterize.timebase import FUTURE_S, HISTORY_S
-from riskmap.sim.failures import HIGHWAY_ENV_LIMITS
-from riskmap.sim.log_replay import HumanLog
+from riskmap.sim.records.failures import HIGHWAY_ENV_LIMITS
+from riskmap.sim.worlds.log_replay import HumanLog
 
 
 def _no_contact_response(run) -> None:
@@ -34,7 +34,7 @@ class HighwayWorld:
     source: str            # the scenes' `source` (the env id)
 
     def record(self, loop_record) -> dict:
-        from riskmap.sim.rollout import episode_record
+        from riskmap.sim.worlds.highway_drive import episode_record
 
         return episode_record(self.run, self.driver, loop_record, self.episode)
 
@@ -58,10 +58,11 @@ class HighwaySource:
 
     def world(self, record: SceneRecord, log: HumanLog, planner, planner_spec: str, control_hz: int,
               replan_hz: int) -> HighwayWorld:
-        from riskmap.sim.episode import cached_env
-        from riskmap.sim.log_replay import LogReplayEpisode
-        from riskmap.sim.plan import requires_log
-        from riskmap.sim.rollout import DriveConfig, DriveHooks
+        from riskmap.sim.loop.plan import requires_log
+        from riskmap.sim.loop.rollout import DriveHooks
+        from riskmap.sim.worlds.episode import cached_env
+        from riskmap.sim.worlds.highway_drive import DriveConfig
+        from riskmap.sim.worlds.log_replay import LogReplayEpisode
 
         scene = record.scene
         env = cached_env(scene.env_id, control_hz)

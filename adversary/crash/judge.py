@@ -24,14 +24,13 @@ from scipy.interpolate import CubicHermiteSpline
 
 from adversary.crash.scene_source import scene_source
 from adversary.crash.scenes import CONTROL_HZ, WINDOW_DT_S, SceneRecord
-from riskmap.sim.alternatives import ego_only_solution
 from rasterize.errors import InputError
 from rasterize.frames import box_corners
 from rasterize.timebase import FUTURE_S, HISTORY_S, REPLAN_HZ
 from riskmap.registry import cached_planner
-from riskmap.sim.failures import classify_failure
-from riskmap.sim.log_replay import HumanLog
-from riskmap.sim.metrics import (
+from riskmap.sim.records.alternatives import ego_only_solution
+from riskmap.sim.records.failures import classify_failure
+from riskmap.sim.records.metrics import (
     COLLISION_TYPES,
     STRIVE,
     box_iou,
@@ -41,6 +40,7 @@ from riskmap.sim.metrics import (
     min_box_gap,
     off_road_fraction,
 )
+from riskmap.sim.worlds.log_replay import HumanLog
 
 COLLISION_IOU = STRIVE.collision_iou            # a collision is a box IoU above this
 OFF_ROAD_FRACTION = STRIVE.off_road_fraction    # off-road when more than this share of the box is off
@@ -51,7 +51,7 @@ CUT_IN_LOOKBACK_S = 3.0         # a cut-in adversary was beside the ego within t
 GAP_RADIUS_M = 40.0             # others farther (centre distance) do not count for the min gap
 # Accelerations tried with a lane change in the solution check (with the default set along the path).
 SOLUTION_LATERAL_ACCELS_MPS2 = (-6.0, -3.0, 0.0, 2.0)
-# Box IoU, off-road and the collision classifier are defined in riskmap.sim.metrics; callers
+# Box IoU, off-road and the collision classifier are defined in riskmap.sim.records.metrics; callers
 # keep importing them from here.
 __all__ = ["COLLISION_IOU", "COLLISION_TYPES", "OFF_ROAD_FRACTION", "Rollout", "box_iou", "first_collision", "braking_track",
            "classify_collision", "drivable_area", "ego_future_2hz", "ego_track_2hz", "handover_offsets",
@@ -173,7 +173,7 @@ def rollout(record: SceneRecord, tracks: np.ndarray, rows, planner, planner_spec
     `scene_steps`: 10 Hz steps at which the drive is cut into training windows (2 s of history
     and 6 s of future at 2 Hz, as `riskmap collect` cuts them; times past the drive invalid),
     returned in `Rollout.scenes`."""
-    from riskmap.sim.rollout import drive_world
+    from riskmap.sim.loop.rollout import drive_world
 
     started = time.perf_counter()
     if abs(1.0 / control_hz - record.log.dt_s) > 1e-9:
@@ -333,11 +333,11 @@ def judge(record: SceneRecord, tracks: np.ndarray, rows, adversary_row: int, pla
     ego_min_accel_mps2 / ego_max_abs_accel_mps2: see `_ego_accelerations`, over the 2 s before
       the collision (before the end of the rollout without one).
     collision_type: `classify_collision` over the 3 s before the collision (None without one).
-    solution_found: STRIVE's solution check (`riskmap.sim.alternatives.ego_only_solution` on the
+    solution_found: STRIVE's solution check (`riskmap.sim.records.alternatives.ego_only_solution` on the
       rollout: could the ego alone, from 3 s before, have avoided every box): along its own path
       with constant accelerations (solution_found_longitudinal), or moving one lane width left or
       right within 2 s while staying on the road; None without a collision.
-    failure: the collision with the adversary classified (`riskmap.sim.failures.classify_failure`:
+    failure: the collision with the adversary classified (`riskmap.sim.records.failures.classify_failure`:
       fault, avoidable by a driver who reacts once the threat is visible, a valid attack); without
       one, the ego's first collision with any other vehicle from t0 (no attack to validate);
       None without a collision.

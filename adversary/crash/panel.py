@@ -4,7 +4,7 @@ Lanes from the window; every window row's 2 s past in grey; the generated (splic
 the other rows in blue and the adversary's in red; the ego's closed-loop path in green (dashed:
 the human's logged future for comparison). Boxes are drawn at the collision time (the final
 time without one), with the collision point marked, and the key metrics in the title. A
-collision the ego could have avoided (`riskmap.sim.failures`) shows the alternative that avoids
+collision the ego could have avoided (`riskmap.sim.records.failures`) shows the alternative that avoids
 it, dotted, from where the ego reacted (a diamond) to the collision time, with its box there.
 """
 
@@ -18,8 +18,8 @@ from adversary.crash.judge import Rollout, splice_tracks
 from adversary.crash.scenes import SceneRecord
 from rasterize.frames import box_corners
 from riskmap.infra.atomic import atomic_write
-from riskmap.sim.failures import failure_words
-from riskmap.sim.record import current_names
+from riskmap.sim.records.failures import failure_words
+from riskmap.sim.records.record import current_names
 
 _GREY, _BLUE, _RED, _GREEN = "0.55", "tab:blue", "tab:red", "tab:green"
 
@@ -99,7 +99,7 @@ def save_attack_panel(record: SceneRecord, tracks: np.ndarray, rows, adversary_r
                               closed=True, facecolor=_GREEN, alpha=0.45, edgecolor=_GREEN, zorder=6))
     failure = metrics.get("failure") or {}
     if metrics["collision"] and failure.get("avoidance"):
-        from riskmap.sim.alternatives import alternative_track
+        from riskmap.sim.records.alternatives import alternative_track
 
         react = round(failure["reaction_time_s"] / rollout.dt_s)
         avoid = failure["avoidance"]

@@ -50,9 +50,9 @@ from rasterize.errors import InputError
 from rasterize.frames import highway_env_from_world
 from rasterize.timebase import CONTROL_HZ
 from riskmap.data.collect_commonroad import CommonRoadCollectConfig
-from riskmap.sim.commonroad_replay import ReplayConfig, road_from_lanelets
-from riskmap.sim.log_replay import HumanLog
-from riskmap.sim.metrics import centre_off_lane
+from riskmap.sim.records.metrics import centre_off_lane
+from riskmap.sim.worlds.commonroad_replay import ReplayConfig, road_from_lanelets
+from riskmap.sim.worlds.log_replay import HumanLog
 
 LOG_DT_S = 1 / CONTROL_HZ      # the log's step (0.1 s: 10 Hz, the control rate)
 # Tracks are smoothed as `riskmap collect --from-commonroad` smooths them (NGSIM positions jump).

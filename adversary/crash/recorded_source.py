@@ -29,10 +29,10 @@ from rasterize.commonroad.tracks import RecordedTraffic
 from rasterize.errors import InputError
 from rasterize.frames import highway_env_from_world
 from rasterize.scene import Scene
-from riskmap.sim.commonroad_replay import CommonRoadWorld, ReplayConfig
-from riskmap.sim.failures import CAR_LIMITS
-from riskmap.sim.log_replay import HumanLog
-from riskmap.sim.metrics import centre_off_lane
+from riskmap.sim.records.failures import CAR_LIMITS
+from riskmap.sim.records.metrics import centre_off_lane
+from riskmap.sim.worlds.commonroad_replay import CommonRoadWorld, ReplayConfig
+from riskmap.sim.worlds.log_replay import HumanLog
 
 
 class AttackWorld(CommonRoadWorld):
@@ -93,8 +93,8 @@ class _LogPlayback:
 def _driver(planner, traffic: RecordedTraffic, ego_id: int):
     """What drives the ego on a recording: log playback for a planner that needs the log, the
     recordings' IDM/MOBIL for one that drives itself, else the planner."""
-    from riskmap.sim.plan import drives_itself, requires_log
-    from riskmap.sim.recorded_idm import RecordedRouteIdmPlanner
+    from riskmap.sim.drivers.recorded_idm import RecordedRouteIdmPlanner
+    from riskmap.sim.loop.plan import drives_itself, requires_log
 
     if requires_log(planner):
         return _LogPlayback()
@@ -145,7 +145,7 @@ class RecordedWorld:
     _arrays: tuple | None = None
 
     def record(self, loop_record) -> dict:
-        from riskmap.sim.record import EpisodeRecord
+        from riskmap.sim.records.record import EpisodeRecord
 
         world, scene = self.run, self.record_.scene
         return EpisodeRecord.measured(
@@ -177,7 +177,7 @@ class RecordedWorld:
         return _final_scene(self.traffic, states, valid, self.log.ego_id, self.log.dt_s, self.record_.scene.env_id)
 
     def window(self, step: int) -> Scene:
-        from riskmap.sim.commonroad_replay import route_scene_config
+        from riskmap.sim.worlds.commonroad_replay import route_scene_config
 
         states, valid = self._drove()
         return _scene_at(self.traffic, states, valid, self.log.ego_id, self.log.dt_s, self.record_.scene.env_id,
@@ -191,8 +191,8 @@ class RecordedSource:
 
     def world(self, record: SceneRecord, log: HumanLog, planner, planner_spec: str, control_hz: int,
               replan_hz: int) -> RecordedWorld:
-        from riskmap.sim.commonroad_replay import route_scene_config
-        from riskmap.sim.rollout import DriveHooks, LoopConfig
+        from riskmap.sim.loop.rollout import DriveHooks, LoopConfig
+        from riskmap.sim.worlds.commonroad_replay import route_scene_config
 
         scene = record.scene
         if abs(log.dt_s * control_hz - 1.0) > 1e-9:

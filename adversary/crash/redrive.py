@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from adversary.crash.judge import judge, rollout
-from riskmap.sim.plan import traits_of
+from riskmap.sim.loop.plan import traits_of
 
 GUARD_SUMMARY_KEYS = ("frames", "interventions", "intervention_ratio", "single", "sustained", "hard")
 

@@ -34,8 +34,8 @@ from riskmap.infra.atomic import atomic_write, write_json
 from riskmap.infra.parallel import run_parallel
 from riskmap.infra.provenance import provenance
 from riskmap.infra.rundir import claim_out_dir, lock_out_dir, read_settings, refuse_unless_resume
-from riskmap.sim.plan_checks import implausible_note, summarise_implausible
-from riskmap.sim.record import current_names
+from riskmap.sim.loop.plan_checks import implausible_note, summarise_implausible
+from riskmap.sim.records.record import current_names
 
 INDEX = "index.json"
 
@@ -44,7 +44,7 @@ def record_scenes(env_id: str, seed: int, count: int, out: Path, first_episode: 
                   t0_s: float = 2.0, resume: bool = False, progress: bool = True,
                   static_agents: int = 0) -> dict:
     """`static_agents`: parked / stopped vehicles added to every episode
-    (`riskmap.sim.static_agents`), kept in each scene and in the index."""
+    (`riskmap.sim.drivers.static_agents`), kept in each scene and in the index."""
     from adversary.crash.scenes import AttackScene, record_attack_scene
 
     out = Path(out)
@@ -216,7 +216,7 @@ def _interval(successes: int, trials: int) -> list[float] | None:
 
 
 def summarise(records: list[dict]) -> dict:
-    from riskmap.sim.failures import summarise_failures
+    from riskmap.sim.records.failures import summarise_failures
 
     ok = [r for r in records if r["status"] == "ok"]
     hits = [r for r in ok if r["collision"]]
@@ -246,7 +246,7 @@ def summarise(records: list[dict]) -> dict:
         "kinematic_value_mps": float(np.mean(kin)) if kin else None,
         "solution_rate": float(np.mean(solved)) if solved else None,
         "collision_types": types,
-        # valid, avoidable, at-fault: the failures that count (riskmap.sim.failures)
+        # valid, avoidable, at-fault: the failures that count (riskmap.sim.records.failures)
         "failures": summarise_failures([r["metrics"].get("failure") for r in hits], n),
         "seconds_per_scene_median": float(np.median(seconds)) if seconds else None,
         "seconds_per_scene_mean": float(np.mean(seconds)) if seconds else None,
@@ -261,7 +261,7 @@ def summarise(records: list[dict]) -> dict:
 def table_row(label: str, s: dict) -> str:
     """One row of TABLE_HEADER: the failures that count first, the raw collision rate beside them;
     valid / avoidable / fault columns count collisions (– when no record could be classified)."""
-    from riskmap.sim.failures import summarise_failures
+    from riskmap.sim.records.failures import summarise_failures
 
     def pct(v):
         return "–" if v is None else f"{100 * v:.1f}"
@@ -303,7 +303,7 @@ def _paragraph(text: str) -> str:
 
 # Under every written table: where its columns are defined.
 TABLE_NOTE = ("Columns: valid avoidable at-fault = the failures that count, over every scene; valid, avoidable "
-              "and fault classes count wins (riskmap/sim/failures.py; README, \"Failures that count\"); "
+              "and fault classes count wins (riskmap/sim/records/failures.py; README, \"Failures that count\"); "
               "solution % = STRIVE's hindsight check.")
 
 

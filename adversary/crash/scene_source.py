@@ -2,12 +2,12 @@
 
 `adversary.crash.judge.rollout` drives every scene one way: it splices the generated tracks into
 the scene's log, asks the scene's source for the world (`SceneSource.world`), runs the one closed
-loop (`riskmap.sim.rollout.drive_world`) on it and reads the drive back from that world. What
+loop (`riskmap.sim.loop.rollout.drive_world`) on it and reads the drive back from that world. What
 differs between the kinds lives in their source:
 
 - `HighwaySource` (adversary.crash.highway_source): highway-env scenes. `LogReplayEpisode`
   replays the spliced log; the planner takes the ego at t = 0 and drives the whole log; the
-  drive's record is `riskmap.sim.rollout.drive_episode`'s.
+  drive's record is `riskmap.sim.worlds.highway_drive.drive_episode`'s.
 - `RecordedSource` (adversary.crash.recorded_source): scenes cut from CommonRoad recordings. The
   CommonRoad world replays the spliced log on the recording's lanelets; the ego is the human's
   record up to t0 and handed over there; the record names the planner by its SPEC.
@@ -24,16 +24,16 @@ from typing import Protocol
 import numpy as np
 
 from adversary.crash.scenes import AttackScene, SceneRecord
-from riskmap.sim.log_replay import HumanLog
+from riskmap.sim.worlds.log_replay import HumanLog
 
 
 class SceneWorld(Protocol):
     """One drive of a scene: the world, what drives its ego, and how; then what it recorded."""
 
-    run: object            # the riskmap.sim.world.World that drive_world steps
+    run: object            # the riskmap.sim.loop.world.World that drive_world steps
     driver: object         # what drives the ego there: the planner, or what stands in for it
-    loop: object           # riskmap.sim.rollout.LoopConfig
-    hooks: object          # riskmap.sim.rollout.DriveHooks
+    loop: object           # riskmap.sim.loop.rollout.LoopConfig
+    hooks: object          # riskmap.sim.loop.rollout.DriveHooks
 
     def record(self, loop_record) -> dict:
         """The drive's record (`Rollout.drive`) from drive_world's `LoopRecord`."""
@@ -49,7 +49,7 @@ class SceneWorld(Protocol):
 
 
 class SceneSource(Protocol):
-    limits: object         # riskmap.sim.failures limits the failure classifier holds the ego to
+    limits: object         # riskmap.sim.records.failures limits the failure classifier holds the ego to
 
     def world(self, record: SceneRecord, log: HumanLog, planner, planner_spec: str, control_hz: int,
               replan_hz: int) -> SceneWorld:

@@ -2,7 +2,7 @@
 
 An `AttackScene` names episode `episode` of `riskmap drive --seed scene_seed` on `env_id`,
 attacked at `t0_s`. `record_attack_scene` drives the IDM/MOBIL human ego on it for
-t0 + horizon seconds (`riskmap.sim.log_replay.record_human_episode`, 10 Hz) and cuts the window the
+t0 + horizon seconds (`riskmap.sim.worlds.log_replay.record_human_episode`, 10 Hz) and cuts the window the
 traffic model sees: 2 s of history and `horizon_s` of logged future at 2 Hz (4 + 1 + 12 = 17
 steps for the defaults, current index 4), the ego in row 0 and then the others within `radius_m`
 nearest first, at most `max_agents` rows, with the lanes around the ego, exactly as
@@ -22,9 +22,9 @@ from rasterize.errors import InputError
 from rasterize.scene import Lane, LineType, Scene
 from rasterize.timebase import CONTROL_HZ, FUTURE_S, HISTORY_S, PLAN_DT_S
 from riskmap.infra.atomic import write_json, write_npz
-from riskmap.sim.episode import cached_env
-from riskmap.sim.log_replay import HumanLog
-from riskmap.sim.static_agents import MAX_STATIC_AGENTS, STATIC_FAMILIES
+from riskmap.sim.drivers.static_agents import MAX_STATIC_AGENTS, STATIC_FAMILIES
+from riskmap.sim.worlds.episode import cached_env
+from riskmap.sim.worlds.log_replay import HumanLog
 
 WINDOW_DT_S = PLAN_DT_S    # the traffic model's step (2 Hz)
 # CONTROL_HZ (rasterize.timebase, 10): the recorded logs' rate, and every attack drive's control rate.
@@ -136,8 +136,8 @@ def record_attack_scene(scene: AttackScene, control_hz: int = CONTROL_HZ, radius
     road before t0 + horizon, or no other vehicle is within `radius_m` of the ego at t0 (callers
     that sweep episodes skip those).
     """
-    from riskmap.sim.episode import Episode
-    from riskmap.sim.log_replay import log_of
+    from riskmap.sim.worlds.episode import Episode
+    from riskmap.sim.worlds.log_replay import log_of
 
     scene.check(control_hz)
     if max_agents < 2 or radius_m <= 0:

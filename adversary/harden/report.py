@@ -1,6 +1,6 @@
 """The page of a hardening run (RUN/report.html, RUN/report.md): per round, fresh CRASH on held-out
 scenes with 95% Wilson intervals, the failures that count (valid, avoidable, at fault;
-`riskmap.sim.failures`) first and every win beside them, natural-traffic metrics, and one attacked scene's risk
+`riskmap.sim.records.failures`) first and every win beside them, natural-traffic metrics, and one attacked scene's risk
 map planned by the original and by the last round's planner (RUN/report/*.png)."""
 
 from __future__ import annotations

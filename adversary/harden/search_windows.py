@@ -33,7 +33,7 @@ from adversary.harden.windows import (
     window_steps,
     with_demonstrated_future,
 )
-from riskmap.sim.log_replay import HumanLog, ReplayPlanner
+from riskmap.sim.worlds.log_replay import HumanLog, ReplayPlanner
 
 
 def _drive(search_config: dict, values: np.ndarray, wrap_planner=None):

@@ -6,7 +6,7 @@ From it:
 
     1. the ego's first collision with the adversary, k_c (the judge's criterion, IoU > 0.02);
     2. a collision-free alternative from k_s = k_c - `lookback_s`: of the judge's solution family
-       (`riskmap.sim.alternatives`: constant accelerations along the ego's own path, else one
+       (`riskmap.sim.records.alternatives`: constant accelerations along the ego's own path, else one
        lane width left or right), clear of every box up to the end of the drive (not only to
        k_c) and on the road, the one that keeps the most room to every other vehicle (`choice`);
     3. failing that, the human's own recorded drive where it collides with nobody (on recorded
@@ -35,16 +35,20 @@ from adversary.crash.judge import (
     WINDOW_FUTURE_S,
     WINDOW_HISTORY_S,
     _first_collision,
-    first_collision,
     drivable_area,
+    first_collision,
     rollout,
     splice_tracks,
 )
 from adversary.crash.scenes import WINDOW_DT_S, SceneRecord
-from riskmap.sim.alternatives import alternative_track, first_clear_alternative, safest_clear_alternative
 from rasterize.errors import InputError
-from riskmap.sim.metrics import box_off_road
-from riskmap.sim.plan import traits_of
+from riskmap.sim.loop.plan import traits_of
+from riskmap.sim.records.alternatives import (
+    alternative_track,
+    first_clear_alternative,
+    safest_clear_alternative,
+)
+from riskmap.sim.records.metrics import box_off_road
 
 # Accelerations tried along the path, mildest first.
 ACCELS_MPS2 = (0.0, -2.0, 1.0, -4.0, 2.0, -6.0, -8.0)   # ties go to the mildest
@@ -69,7 +73,7 @@ class HardenWindowConfig:
     # experiments/README, "Hardening", has what each did.
     choice: str = "safest"
     # Learn only from failures that say something about the planner: a valid attack the ego could
-    # have avoided after seeing it (`riskmap.sim.failures`); a record from before the
+    # have avoided after seeing it (`riskmap.sim.records.failures`); a record from before the
     # classification is used as it was.
     valid_avoidable_only: bool = True
 
@@ -222,7 +226,7 @@ def hardening_windows(record: SceneRecord, attack: dict, planner, planner_spec: 
                       config: HardenWindowConfig = HardenWindowConfig()) -> HardenWindows:
     """The training windows of one attack record (module docstring); none for a record without a
     collision, without a clear alternative, or whose counterfactual drive still collides."""
-    from riskmap.sim.log_replay import ReplayPlanner
+    from riskmap.sim.worlds.log_replay import ReplayPlanner
 
     name = attack.get("name", record.scene.where)
     if attack.get("status") != "ok" or not attack.get("collision"):

@@ -5,7 +5,7 @@ family is highway-env's (highway, intersection, ...) or a recorded one's (us101,
 Rates carry Wilson intervals, means percentile-bootstrap intervals (riskmap.infra.stats):
 
     failures that count      valid, avoidable, at-fault collisions / finished jobs (the report's
-                             headline; riskmap.sim.failures): the ego's front hit the other, a
+                             headline; riskmap.sim.records.failures): the ego's front hit the other, a
                              driver reacting 0.5 s after the threat became visible could have
                              avoided it, and (attacks) the adversary did it alone within
                              physical limits. failure_classes counts each class over the
@@ -43,9 +43,9 @@ from adversary.attacks.episode import GUARD_FIELDS
 from adversary.attacks.recorded import job_family
 from riskmap.infra.stats import bootstrap_mean, wilson
 from riskmap.registry import display_name, display_names, split_name
-from riskmap.sim.failures import summarise_failures
-from riskmap.sim.metrics import CAMPAIGN_COLLISION_TYPES
-from riskmap.sim.record import current_names
+from riskmap.sim.records.failures import summarise_failures
+from riskmap.sim.records.metrics import CAMPAIGN_COLLISION_TYPES
+from riskmap.sim.records.record import current_names
 
 COLLISION_TYPES = CAMPAIGN_COLLISION_TYPES      # the labels a campaign record's collision_type can hold
 
@@ -246,7 +246,7 @@ def _name_rows(rows, names: dict[str, str]) -> None:
 def report_numbers(records: list[dict], gallery: int,
                    names: dict[str, str] | None = None) -> tuple[dict, dict]:
     """(results, timing): everything the page shows; timing is machine-dependent. Records of
-    older campaigns are read under today's names (riskmap.sim.record.current_names). `names`:
+    older campaigns are read under today's names (riskmap.sim.records.record.current_names). `names`:
     SPEC -> display name (default: `display_names` of the records' planners)."""
     records = [current_names(r) for r in records]
     names = names or display_names(sorted({r["planner"] for r in records}))

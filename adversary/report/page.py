@@ -2,7 +2,7 @@
 and a page per job (jobs/JOB_ID.html, its pictures under jobs/media/).
 
 The page opens with the failures that count (valid, avoidable, at-fault collisions,
-riskmap.sim.failures): a paragraph written from the numbers (adversary.report.summary) and their
+riskmap.sim.records.failures): a paragraph written from the numbers (adversary.report.summary) and their
 rate per planner and attack with its intervals, every collision's rate beside it
 (figures.headline_figure); the tables follow. The worst scenes that collided are animated (GIF, adversary.report.frames).
 
@@ -30,8 +30,8 @@ from rasterize.errors import InputError
 from riskmap.infra.atomic import atomic_write, write_json
 from riskmap.infra.provenance import provenance
 from riskmap.registry import display_names
-from riskmap.sim.failures import failure_explanation, unknown_failure
-from riskmap.sim.record import current_names
+from riskmap.sim.records.failures import failure_explanation, unknown_failure
+from riskmap.sim.records.record import current_names
 
 _PACKAGES = ("riskmap-toolkit", "numpy", "torch", "highway-env", "gymnasium", "scipy", "matplotlib",
              "jinja2", "pyyaml", "imageio", "pillow", "ray")

@@ -1,6 +1,6 @@
 """One closed-loop evaluation of one scenario: drive it with a planner, score it.
 
-The ego is driven by any planner SPEC through `riskmap.sim.rollout.drive_episode`; the template's
+The ego is driven by any planner SPEC through `riskmap.sim.worlds.highway_drive.drive_episode`; the template's
 `Scenario` supplies the initial conditions and the perception degradation through `DriveHooks`.
 Planners and environments are built once per process (evaluations run in worker processes).
 Perception parameters act on planners through the `Scene` they are shown, and on the `idm` ego
@@ -48,7 +48,7 @@ _PROCESS_CACHE: dict = {}
 def _planner_and_env(config: EvaluationConfig):
     """This process's planner and env for `config` (built on first use)."""
     from riskmap.registry import make_planner
-    from riskmap.sim.episode import make_env
+    from riskmap.sim.worlds.episode import make_env
 
     key = (config.planner, config.seed, config.control_hz)
     if key not in _PROCESS_CACHE:
@@ -80,7 +80,7 @@ class Trajectory:
 
     ego_xy: list
     target_xy: list
-    failure: dict | None = None       # the collision's class (riskmap.sim.failures), None without one
+    failure: dict | None = None       # the collision's class (riskmap.sim.records.failures), None without one
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray]:
         return np.asarray(self.ego_xy), np.asarray(self.target_xy)
@@ -92,7 +92,8 @@ def run_scenario(template: Template, values: np.ndarray, config: EvaluationConfi
     """Drive one scenario; returns the drive record and the trajectories of ego and target.
     on_reset, on_step, on_ready: extra `DriveHooks` callbacks; wrap_planner(planner) -> the
     planner that drives (e.g. one that keeps its last plan)."""
-    from riskmap.sim.rollout import DriveConfig, DriveHooks, drive_episode
+    from riskmap.sim.loop.rollout import DriveHooks
+    from riskmap.sim.worlds.highway_drive import DriveConfig, drive_episode
 
     planner, env = _planner_and_env(config)
     if wrap_planner is not None:
@@ -130,7 +131,7 @@ def run_scenario(template: Template, values: np.ndarray, config: EvaluationConfi
                        on_plan=frames, on_step=log)
     record = drive_episode(env, planner, drive_config, 0, hooks)
     if record["collided"] and "run" in driven:
-        from riskmap.sim.failures import classify_run
+        from riskmap.sim.records.failures import classify_run
 
         trajectory.failure = classify_run(driven["run"], scenario.target)
     return record, trajectory

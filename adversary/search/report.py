@@ -1,7 +1,7 @@
 """Summary and figures of one search run (OUT of `adversary search`).
 
     summary.json                     collision share, the failures that count among them
-                                     (riskmap.sim.failures), per-generation counts, failure
+                                     (riskmap.sim.records.failures), per-generation counts, failure
                                      diversity, the least-altered failure
     collisions_per_generation.png    collisions per generation (the search paper's Fig. 10)
     best_failure_evolution.png       per generation, the least-altered failing vector (Figs. 11-12)
@@ -23,7 +23,7 @@ import numpy as np
 from adversary.search.scenarios import Template, get_template
 from riskmap.infra.atomic import write_json
 from riskmap.registry import display_name
-from riskmap.sim.failures import summarise_failures
+from riskmap.sim.records.failures import summarise_failures
 
 
 def load_run(out: Path) -> tuple[dict, list[list[dict]]]:

@@ -3,7 +3,7 @@
 A template names its parameters (perception degradation of what the ego's planner is shown, and
 the initial conditions and manoeuvre of one target vehicle), their bounds and their neutral
 values. `Template.scenario(values)` turns one vector into the callbacks of one closed-loop
-episode (`riskmap.sim.rollout.DriveHooks`): at the neutral vector the road is exactly the base scene and
+episode (`riskmap.sim.loop.rollout.DriveHooks`): at the neutral vector the road is exactly the base scene and
 the planner sees exactly what was recorded.
 
 Templates (highway-v0, 4 lanes; lane 0 is the leftmost in the driving direction):

@@ -3,7 +3,7 @@
 Each episode: reset the env with a seed derived from (seed, episode), replace the ego by an
 IDM/MOBIL vehicle with its own driver parameters (desired speed, time gap, politeness) -- at
 intersections by default the `yielding` teacher, which also gives way at conflict zones by gap
-acceptance (`riskmap.sim.yielding`; `--human idm` keeps plain IDM/MOBIL) -- step the
+acceptance (`riskmap.sim.drivers.yielding`; `--human idm` keeps plain IDM/MOBIL) -- step the
 road at `record_hz`, record every vehicle, drop vehicles far from the ego (they cannot reach the
 scene and they cost time), then cut training windows (history + future at `window_dt_s`) and
 write them as one shard per episode (`EnvCollectSource`, collected by the one driver
@@ -18,6 +18,7 @@ from pathlib import Path
 from rasterize.config import FAMILY_EXTENTS, RasterConfig, family_of_env
 from rasterize.errors import InputError
 from rasterize.timebase import CONTROL_HZ, FUTURE_S, HISTORY_S, PLAN_DT_S
+
 # The dataset layout and its helpers live with the one collect driver; named here too, where
 # the dataset readers and older callers import them from.
 from riskmap.data.collect_source import (  # noqa: F401
@@ -31,9 +32,9 @@ from riskmap.data.collect_source import (  # noqa: F401
     write_episode_shard,
     write_index_and_manifest,
 )
-from riskmap.sim.episode import FAMILY_SETUPS, Episode, FamilySetup, make_env
-from riskmap.sim.rollout import LoopConfig, drive_world
-from riskmap.sim.yielding import DEMONSTRATORS, demonstrator
+from riskmap.sim.drivers.yielding import DEMONSTRATORS, demonstrator
+from riskmap.sim.loop.rollout import LoopConfig, drive_world
+from riskmap.sim.worlds.episode import FAMILY_SETUPS, Episode, FamilySetup, make_env
 
 
 @dataclass(frozen=True)

@@ -286,7 +286,7 @@ def as_tensors(arrays: dict[str, np.ndarray]) -> dict:
 def with_human_goal(scene):
     """`scene` with its route replaced by the straight line to where the human was at the end of
     the recorded future, so the planner's goal is the human's (the `--goal human` protocol, as
-    `riskmap.sim.commonroad_replay.CommonRoadWorld.scene` does in closed loop)."""
+    `riskmap.sim.worlds.commonroad_replay.CommonRoadWorld.scene` does in closed loop)."""
     import dataclasses
 
     end = scene.ego_future_xy()[-1]

@@ -2,7 +2,7 @@
 each, where it breaks the planner contract (README, "The planner contract").
 
 The planner drives short closed-loop episodes through the one rollout loop. Every plan it makes is
-checked (`riskmap.sim.plan_checks.plan_problems`, the checks the loop itself counts in every
+checked (`riskmap.sim.loop.plan_checks.plan_problems`, the checks the loop itself counts in every
 command); a plan that breaks the contract (or a call that raises) is recorded and replaced by a
 constant-velocity plan so that the episode, and the check, go on. No solution (`NoSolution`) is
 within the contract: counted apart (`Findings.no_solution`), and the loop brakes as it always does.
@@ -21,8 +21,8 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 from rasterize.timebase import REPLAN_HZ
-from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, NoSolution, Plan, PlannerTraits
-from riskmap.sim.plan_checks import plan_problems
+from riskmap.sim.loop.plan import PLAN_DT_S, PLAN_STEPS, NoSolution, Plan, PlannerTraits
+from riskmap.sim.loop.plan_checks import plan_problems
 
 FAMILY_ENVS = ("highway-v0", "merge-v0", "roundabout-v0", "intersection-v0")
 REPLAN_PERIOD_S = 1 / REPLAN_HZ   # the rollout replans at 2 Hz (0.5 s)
@@ -147,7 +147,7 @@ def _drive_recordings(planner, config: CheckConfig, findings: Findings, scenes: 
         scenario_files,
         unique_demonstrators,
     )
-    from riskmap.sim.commonroad_replay import replay_commonroad_episode, route_scene_config
+    from riskmap.sim.worlds.commonroad_replay import replay_commonroad_episode, route_scene_config
 
     files = scenario_files(list(config.recordings), flag="--commonroad")
     demos, traffics, _ = unique_demonstrators(files, CommonRoadCollectConfig(files=(), smoothing_s=0.0))
@@ -173,9 +173,9 @@ def check_planner(spec: str, config: CheckConfig = CheckConfig(), progress: bool
     `config.episodes` short episodes of each family (or recorded vehicles of each of
     `config.recordings`); the breaches found."""
     from riskmap.registry import make_planner
-    from riskmap.sim.episode import cached_env
-    from riskmap.sim.plan import drives_itself
-    from riskmap.sim.rollout import DriveConfig, drive_episode
+    from riskmap.sim.loop.plan import drives_itself
+    from riskmap.sim.worlds.episode import cached_env
+    from riskmap.sim.worlds.highway_drive import DriveConfig, drive_episode
 
     findings = Findings()
     planner = planner if planner is not None else make_planner(spec, seed=config.seed)

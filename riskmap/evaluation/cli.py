@@ -14,7 +14,7 @@ from riskmap.registry import SPEC_HELP
 
 def _cmd_drive(args: argparse.Namespace) -> int:
     from riskmap.evaluation.drive import drive
-    from riskmap.sim.rollout import DriveConfig
+    from riskmap.sim.worlds.highway_drive import DriveConfig
 
     if bool(args.checkpoint) == bool(args.planner):
         raise InputError("pass exactly one of --checkpoint CKPT or --planner SPEC")

@@ -1,7 +1,7 @@
 """`riskmap drive`: closed-loop episodes in highway-env with any planner driving the ego.
 
 The traffic of episode e under seed S is exactly the traffic the demonstrations met (same env
-seed, same human driver parameters); the rollout is `riskmap.sim.rollout.drive_episode`.
+seed, same human driver parameters); the rollout is `riskmap.sim.worlds.highway_drive.drive_episode`.
 Per episode: OUT/episodes/episode_NNNNNN.json (atomic); OUT/summary.json at the end.
 """
 
@@ -18,10 +18,11 @@ from riskmap.infra.atomic import write_json
 from riskmap.infra.provenance import provenance
 from riskmap.infra.rundir import claim_out_dir
 from riskmap.registry import display_name, make_planner
-from riskmap.sim.episode import make_env
-from riskmap.sim.plan_checks import summarise_implausible
-from riskmap.sim.record import current_names
-from riskmap.sim.rollout import DriveConfig, DriveHooks, drive_episode
+from riskmap.sim.loop.plan_checks import summarise_implausible
+from riskmap.sim.loop.rollout import DriveHooks
+from riskmap.sim.records.record import current_names
+from riskmap.sim.worlds.episode import make_env
+from riskmap.sim.worlds.highway_drive import DriveConfig, drive_episode
 
 
 def mean_count(records: list[dict], key: str) -> float | None:

@@ -16,13 +16,13 @@ skips every file already written); at the end, whatever the source:
     OUT/table.md        one layout for every source; a column that does not apply to it is "–"
 
 Safety % is the share of encounters (another vehicle within 30 m) that are dangerously close
-(`riskmap.sim.metrics`), per episode, then mean and 90th percentile; the share of episodes
+(`riskmap.sim.records.metrics`), per episode, then mean and 90th percentile; the share of episodes
 without a collision or leaving the road is reported beside it. Every collision is classified
-(`riskmap.sim.failures`): at fault / struck from behind / side, and whether a driver reacting to
+(`riskmap.sim.records.failures`): at fault / struck from behind / side, and whether a driver reacting to
 what it could see would have avoided it; "that count" are at fault and avoidable. Red-light
 violations (recordings with traffic lights) are summed with the recorded humans' own count as the
 reference; records written before the count existed make it n/a. Plans that fail the planner
-contract's checks (`riskmap.sim.plan_checks`; driven as made) are summed the same way and named in
+contract's checks (`riskmap.sim.loop.plan_checks`; driven as made) are summed the same way and named in
 a line under the table. The table shows each planner by its display name
 (`riskmap.registry.display_names`); the CSV and results.json carry the whole SPEC beside it, and
 the episode folders stay named by the SPEC (`planner_slug`).
@@ -46,10 +46,10 @@ from riskmap.infra.parallel import run_parallel
 from riskmap.infra.provenance import provenance
 from riskmap.infra.rundir import claim_out_dir
 from riskmap.registry import display_names
-from riskmap.sim.failures import summarise_failures
-from riskmap.sim.metrics import safety_pct, summarise_metric
-from riskmap.sim.plan_checks import implausible_note, summarise_implausible
-from riskmap.sim.record import current_names
+from riskmap.sim.loop.plan_checks import implausible_note, summarise_implausible
+from riskmap.sim.records.failures import summarise_failures
+from riskmap.sim.records.metrics import safety_pct, summarise_metric
+from riskmap.sim.records.record import current_names
 
 __all__ = ["evaluate", "planner_label", "planner_slug", "summarise", "markdown_table"]
 
@@ -130,7 +130,7 @@ def summarise(source: ScenarioSource, planners: Sequence[str], rows: list[dict])
             entry[f"{key}_rate"] = float(np.mean([bool(r[key]) for r in mine]))
         entry["collision_rate"] = entry["collided_rate"]        # the name recording runs used
         entry["safe_episodes_pct"] = 100.0 * float(np.mean([not (r["collided"] or r["off_road"]) for r in mine]))
-        # every collision classified (riskmap.sim.failures); a record without it is unknown
+        # every collision classified (riskmap.sim.records.failures); a record without it is unknown
         entry["failures"] = summarise_failures([r.get("failure") for r in mine if r["collided"]], len(mine))
         entry.update({k: entry["failures"][k] for k in FAILURE_CLASSES})
         dangerous = sum(r["dangerous"] for r in mine)

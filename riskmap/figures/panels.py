@@ -224,7 +224,7 @@ def save_spacetime_strip(plan, grid, path: Path, title: str = "",
     import matplotlib.pyplot as plt
     from matplotlib.lines import Line2D
 
-    from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS
+    from riskmap.sim.loop.plan import PLAN_DT_S, PLAN_STEPS
 
     risk = np.asarray(plan.risk_steps, dtype=np.float64)
     visits = plan.svf_steps
@@ -301,13 +301,13 @@ def save_spacetime_strip(plan, grid, path: Path, title: str = "",
 
 def plan_frame_writer(out_dir: Path, planner, stem: str, label: str, env_id: str,
                       name: str | None = None):
-    """A rollout `on_plan` hook (riskmap.sim.rollout.DriveHooks) that writes one PNG per replan,
+    """A rollout `on_plan` hook (riskmap.sim.loop.rollout.DriveHooks) that writes one PNG per replan,
     `out_dir/{stem}_tNNNN.png` (NNNN: the control step), titled `{label} t = …`. A planner
     without a raster of its own (constant velocity, a `py:` plug-in, IDM) is drawn on a raster
     of `env_id`'s family extent. A frame whose plan has no risk map says so in its title,
     naming the planner (`name`, default its class)."""
     from rasterize.config import FAMILY_EXTENTS, family_of_env
-    from riskmap.sim.plan import traits_of
+    from riskmap.sim.loop.plan import traits_of
 
     raster = traits_of(planner).raster
     if not isinstance(raster, RasterConfig):   # a plug-in may use the name for something else

@@ -190,7 +190,8 @@ class _KeepRun:
 
 def run_job(job: Job, config: GuardCollectConfig, env, planner) -> tuple[dict, dict]:
     from riskmap.guard.aggressors import AggressorHook
-    from riskmap.sim.rollout import DriveConfig, DriveHooks, drive_episode
+    from riskmap.sim.loop.rollout import DriveHooks
+    from riskmap.sim.worlds.highway_drive import DriveConfig, drive_episode
 
     keep = _KeepRun()
     hooks = (keep, AggressorHook()) if job.aggressive else (keep,)
@@ -211,7 +212,7 @@ def collect(config: GuardCollectConfig, out: Path, resume: bool = False, progres
     from tqdm import tqdm
 
     from riskmap.registry import make_planner
-    from riskmap.sim.episode import make_env
+    from riskmap.sim.worlds.episode import make_env
 
     out = Path(out)
     jobs_dir = out / "jobs"

@@ -36,7 +36,7 @@ from rasterize.scene import Scene
 from riskmap.guard.events import nearest_neighbours
 from riskmap.guard.features import OBSERVED, SEGMENT_S
 from riskmap.registry import make_planner
-from riskmap.sim.plan import PLAN_DT_S, HumanDriver, Plan, drives_itself, traits_of
+from riskmap.sim.loop.plan import PLAN_DT_S, HumanDriver, Plan, drives_itself, traits_of
 
 GUARD_CHECKPOINT = "checkpoints/guard_tgat"
 LOG = logging.getLogger("riskmap.guard")
@@ -164,7 +164,7 @@ class Guard:
 
 
 def _family_of(run) -> str:
-    from riskmap.sim.episode import FAMILY_SETUPS
+    from riskmap.sim.worlds.episode import FAMILY_SETUPS
 
     # A recorded world (CommonRoad) has no highway-env family setup: the default threshold applies.
     return next((name for name, setup in FAMILY_SETUPS.items() if setup is getattr(run, "setup", None)), "")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from rasterize.scene import Scene
-from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, Plan
+from riskmap.sim.loop.plan import PLAN_DT_S, PLAN_STEPS, Plan
 
 
 class ConstantVelocityPlanner:

@@ -32,7 +32,7 @@ from rasterize.raster import rasterize_scene
 from rasterize.scene import Scene
 from riskmap.infra.checkpoint import route_settings_of
 from riskmap.planner.model import SPEED_SCALE_MPS, ModelConfig, RiskMapGenerator
-from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, Plan
+from riskmap.sim.loop.plan import PLAN_DT_S, PLAN_STEPS, Plan
 
 BC_KINDS = ("cnn", "cnn_lstm", "rvsg")
 CHECKPOINT_KIND = "bc"

@@ -24,7 +24,7 @@ Trajectory` will do. At every replan `CommonRoadPlanner.plan(scene)` hands it
 - `ref_path`: the route ahead [K, 2] (world m), or None;
 
 and the scenario's time step now is round(time_s / STEP_S) (`CommonRoadView.time_step`). The
-`Trajectory` it returns becomes a timed `Plan` (`riskmap.sim.plan`): its positions after now, at
+`Trajectory` it returns becomes a timed `Plan` (`riskmap.sim.loop.plan`): its positions after now, at
 its own step, with its speeds where every state has one; the loop tracks it at that step.
 A planner that returns None or a trajectory with no state after now, or raises `NoSolution`,
 has no plan: the loop counts it (`no_solution_plans`) and brakes.
@@ -41,7 +41,7 @@ import numpy as np
 
 from rasterize.frames import ego_from_world, ego_pose
 from rasterize.scene import AgentKind, Scene
-from riskmap.sim.plan import NoSolution, Plan
+from riskmap.sim.loop.plan import NoSolution, Plan
 
 PREDICTIONS = ("none", "cv", "toolkit")
 # none: the obstacles' states now only; cv: constant speed along their heading; toolkit: the

@@ -30,7 +30,7 @@ from torchvision.models import resnet34
 from rasterize.config import RasterConfig
 from rasterize.errors import InputError
 from riskmap.infra.checkpoint import load_weights, read_sidecar, sidecar_section
-from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS
+from riskmap.sim.loop.plan import PLAN_DT_S, PLAN_STEPS
 
 
 @dataclass(frozen=True)

@@ -26,8 +26,7 @@ from riskmap.planner.irl import goal_log_map
 from riskmap.planner.risk_goal import RiskGoalConfig, risk_goal_cell
 from riskmap.planner.sampler import SamplerConfig, sample_trajectory
 from riskmap.planner.vi import soft_value_iteration, state_visitation
-from riskmap.sim.plan import Plan
-
+from riskmap.sim.loop.plan import Plan
 
 # What planning reads from a spatial checkpoint's sidecar besides the network's own sections
 # (`load_model` checks those): section -> the keys it cannot do without.

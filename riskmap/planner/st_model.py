@@ -34,7 +34,7 @@ from torch import nn
 from rasterize.errors import InputError
 from rasterize.spacetime import EVIDENCE_CHANNELS
 from riskmap.planner.model import ModelConfig, RiskMapGenerator
-from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS
+from riskmap.sim.loop.plan import PLAN_DT_S, PLAN_STEPS
 
 PLANNER_KIND = "spacetime"            # a checkpoint sidecar's `planner` (absent: the spatial one)
 MAX_FORWARD_CELLS = 16                # K beyond this is no longer a step of one vehicle

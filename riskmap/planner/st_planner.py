@@ -27,7 +27,7 @@ from riskmap.planner.irl import goal_log_map
 from riskmap.planner.st_model import SpaceTimeConfig, load_spacetime_model
 from riskmap.planner.st_sampler import SpaceTimeSamplerConfig, spacetime_plan
 from riskmap.planner.st_vi import spacetime_value_iteration, spacetime_visitation
-from riskmap.sim.plan import Plan
+from riskmap.sim.loop.plan import Plan
 
 # What planning reads from a space-time checkpoint's sidecar besides the network's own sections
 # (`load_spacetime_model` checks those): section -> the keys it cannot do without.

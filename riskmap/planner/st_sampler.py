@@ -24,7 +24,7 @@ from rasterize.config import GridConfig
 from rasterize.frames import ego_from_grid
 from riskmap.planner.sampler import distinct_at_least, kmeans
 from riskmap.planner.st_vi import spacetime_actions
-from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS
+from riskmap.sim.loop.plan import PLAN_DT_S, PLAN_STEPS
 
 
 @dataclass(frozen=True)

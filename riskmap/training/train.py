@@ -213,7 +213,7 @@ def _evaluate(model, loader, config: TrainConfig, irl, grid, device,
 def dataset_sidecar(dataset: DemoDataset, train_idx: list[int], val_idx: list[int]) -> dict:
     """What a checkpoint records of its data: source, window counts, held-out groups and the
     settings derived from recorded data (the route rule's speed limit and acceleration, which
-    the planner needs in closed loop: `riskmap.sim.commonroad_replay.route_scene_config`)."""
+    the planner needs in closed loop: `riskmap.sim.worlds.commonroad_replay.route_scene_config`)."""
     groups = sorted({dataset.group_of(i) for i in val_idx} - {None}, key=natural_key)
     return {"env_id": dataset.source, "windows": len(dataset), "train_windows": len(train_idx),
             "val_windows": len(val_idx), "val_groups": groups, "derived": dataset.derived,

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from adversary.attacks.monitor import collision_type
-from riskmap.sim.alternatives import ego_only_solution
 from riskmap.infra.stats import bootstrap_mean, sign_test, wilson
-from riskmap.sim.aggressive import softmin_agent_weights
+from riskmap.sim.drivers.aggressive import softmin_agent_weights
+from riskmap.sim.records.alternatives import ego_only_solution
 
 
 def test_wilson_interval_matches_the_closed_form():

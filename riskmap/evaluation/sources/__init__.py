@@ -9,7 +9,7 @@ A scenario says:
 - `prepare(out)`: make the recorded log the planners are compared with, once (highway-env: drive
   the IDM/MOBIL human and save it; a recording already is its log); `recorded_log(out)` reads it;
 - `drive(spec, out)`: one episode of planner SPEC, run by the existing world of the source
-  (`riskmap.sim.log_replay` / `riskmap.sim.episode`, `riskmap.sim.commonroad_replay`), returned as
+  (`riskmap.sim.worlds.log_replay` / `riskmap.sim.worlds.episode`, `riskmap.sim.worlds.commonroad_replay`), returned as
   the record to store; `row(spec, record)`: that record in the common per-episode layout.
 
 The source gives the run's settings (run.json, what may change on `--resume`), the route rule,

@@ -12,8 +12,8 @@ from rasterize.errors import InputError
 from rasterize.timebase import CONTROL_HZ, REPLAN_HZ
 from riskmap.evaluation.sources.base import planner_label, worker_planner
 from riskmap.registry import display_names
-from riskmap.sim.episode import FAMILY_SETUPS, cached_env
-from riskmap.sim.metrics import (
+from riskmap.sim.loop.rollout import check_replan_hz
+from riskmap.sim.records.metrics import (
     SafetyConfig,
     ade_m,
     dangerous_encounters,
@@ -22,7 +22,7 @@ from riskmap.sim.metrics import (
     path_length_m,
     safety_pct,
 )
-from riskmap.sim.rollout import check_replan_hz
+from riskmap.sim.worlds.episode import FAMILY_SETUPS, cached_env
 
 MODES = ("log", "reactive")
 
@@ -109,7 +109,7 @@ class EnvScenario:
 
     def prepare(self, out: Path) -> None:
         """Record the human's episode unless it is on disk."""
-        from riskmap.sim.log_replay import record_human_episode
+        from riskmap.sim.worlds.log_replay import record_human_episode
 
         if self.prepared(out):
             return
@@ -119,17 +119,17 @@ class EnvScenario:
         log.save(self._log_path(out))
 
     def recorded_log(self, out: Path):
-        from riskmap.sim.log_replay import HumanLog
+        from riskmap.sim.worlds.log_replay import HumanLog
 
         return HumanLog.load(self._log_path(out))
 
     def drive(self, spec: str, out: Path) -> dict:
         """Drive (or, for `idm`, read) this episode; returns its record of metrics."""
-        from riskmap.sim.episode import Episode
-        from riskmap.sim.failures import classify_failure, classify_run, first_contact
-        from riskmap.sim.log_replay import LogReplayEpisode
-        from riskmap.sim.plan import traits_of
-        from riskmap.sim.rollout import DriveConfig, drive_episode
+        from riskmap.sim.loop.plan import traits_of
+        from riskmap.sim.records.failures import classify_failure, classify_run, first_contact
+        from riskmap.sim.worlds.episode import Episode
+        from riskmap.sim.worlds.highway_drive import DriveConfig, drive_episode
+        from riskmap.sim.worlds.log_replay import LogReplayEpisode
 
         s = self.source
         log = self.recorded_log(out)
@@ -167,7 +167,7 @@ def _table_record(spec: str, base: dict, metrics: dict, collided: bool, off_road
     """One episode as an `EpisodeRecord` dict. Distance and simulated time are the recorded
     states' (the same for the human's log and a driven episode); speed, gap and plan times come
     from the drive (`drive_episode`'s record) and are None for the human, who is not driven."""
-    from riskmap.sim.record import EpisodeRecord
+    from riskmap.sim.records.record import EpisodeRecord
 
     metrics = dict(metrics)
     drive = drive or {"mean_speed_mps": None, "min_gap_m": None, "plan_calls": 0,

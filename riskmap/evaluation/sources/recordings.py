@@ -30,10 +30,10 @@ class RecordingSource:
     """Every vehicle that `riskmap collect --from-commonroad` makes a demonstrator (2 s of history
     and 6 s of future; once, however many files of its traffic configuration hold it) is one
     episode: handed over to the planner 2 s into its record and driven to its end among the other
-    recorded vehicles (`riskmap.sim.commonroad_replay`): by time in `log` mode, along their paths
+    recorded vehicles (`riskmap.sim.worlds.commonroad_replay`): by time in `log` mode, along their paths
     braking for the ego in `reactive` mode, towards `goal` (the route rule, or the human's own
     end). `replay` is the recording tracked by the controller, `idm` IDM + MOBIL along the
-    vehicle's lanelets (`riskmap.sim.recorded_idm`). `limit`: only that many vehicles, drawn with
+    vehicle's lanelets (`riskmap.sim.drivers.recorded_idm`). `limit`: only that many vehicles, drawn with
     `seed` (kept in file order), the same for every planner; `goal_variance` (cells²) overrides
     risk-map planners' planning-time goal variance."""
 
@@ -60,7 +60,7 @@ class RecordingSource:
         return self.goal
 
     def replay_config(self):
-        from riskmap.sim.commonroad_replay import ReplayConfig
+        from riskmap.sim.worlds.commonroad_replay import ReplayConfig
 
         return ReplayConfig(goal=self.goal, mode=self.mode, replan_hz=self.replan_hz)
 
@@ -146,8 +146,8 @@ class RecordedScenario:
     def _planner(self, spec: str):
         """`replay` and `idm` are tied to their recording; any other SPEC is made once per process
         and reused (each episode resets it, so results do not depend on order)."""
-        from riskmap.sim.commonroad_replay import RecordedFuturePlanner
-        from riskmap.sim.recorded_idm import RecordedRouteIdmPlanner
+        from riskmap.sim.drivers.recorded_idm import RecordedRouteIdmPlanner
+        from riskmap.sim.worlds.commonroad_replay import RecordedFuturePlanner
 
         traffic = recorded_traffic(self.path)
         if spec == "replay":
@@ -157,7 +157,7 @@ class RecordedScenario:
         return worker_planner(spec, self.source.seed, self.source.goal_variance)
 
     def drive(self, spec: str, out: Path) -> dict:
-        from riskmap.sim.commonroad_replay import replay_commonroad_episode
+        from riskmap.sim.worlds.commonroad_replay import replay_commonroad_episode
 
         planner = self._planner(spec)
         return replay_commonroad_episode(self.recorded_log(out), self.vehicle, planner,

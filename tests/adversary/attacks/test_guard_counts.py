@@ -5,7 +5,7 @@ import pytest
 
 from adversary.attacks.crash import crash_record
 from adversary.attacks.episode import GUARD_FIELDS, RecordingPlanner, clear_guard, guard_counts, record_of
-from riskmap.sim.record import EpisodeRecord
+from riskmap.sim.records.record import EpisodeRecord
 from tests.adversary.attacks.conftest import NeverPlans
 
 NONE = dict.fromkeys(GUARD_FIELDS)

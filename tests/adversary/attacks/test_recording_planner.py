@@ -1,7 +1,7 @@
 """The report's recording wrapper changes nothing the rollout reads from the planner it wraps."""
 
 from adversary.attacks.episode import RecordingPlanner
-from riskmap.sim.plan import requires_log
+from riskmap.sim.loop.plan import requires_log
 from tests.adversary.attacks.conftest import NeverPlans
 
 

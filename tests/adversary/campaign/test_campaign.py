@@ -34,7 +34,7 @@ def test_every_job_has_one_record_with_the_fields_of_the_brief(tiny_campaign):
         assert r["has_adversary"] == (r["attack"] != "natural")
         assert (r["kinematic_mps"] is not None) == r["collided"]
         assert (r["solution_found"] is not None) == r["collided"]
-        # every collision classified (riskmap.sim.failures), the adversary's as an attack
+        # every collision classified (riskmap.sim.records.failures), the adversary's as an attack
         assert (r["failure"] is not None) == r["collided"]
         if r["collided"]:
             assert r["failure"]["fault"] in ("at fault", "struck from behind", "side")

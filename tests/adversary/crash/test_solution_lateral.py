@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from riskmap.sim.alternatives import ego_only_solution
+from riskmap.sim.records.alternatives import ego_only_solution
 
 
 def _stopped_car_close_ahead():

@@ -14,10 +14,10 @@ from adversary.crash.scenes import AttackScene, load_record, record_attack_scene
 from adversary.crash.selection import candidates
 from rasterize.errors import InputError
 from riskmap.registry import cached_planner
-from riskmap.sim.episode import Episode, cached_env, make_env
-from riskmap.sim.log_replay import LogReplayEpisode, log_of
-from riskmap.sim.metrics import min_box_gap, vehicle_box
-from riskmap.sim.static_agents import StaticPlacement, is_static
+from riskmap.sim.drivers.static_agents import StaticPlacement, is_static
+from riskmap.sim.records.metrics import min_box_gap, vehicle_box
+from riskmap.sim.worlds.episode import Episode, cached_env, make_env
+from riskmap.sim.worlds.log_replay import LogReplayEpisode, log_of
 
 CHECKPOINTS = Path(__file__).resolve().parents[3] / "checkpoints"
 # highway-v0 seed 500 episode 4: the three static cars stand in the ego's own lane, 97 m, 127 m

@@ -8,7 +8,7 @@ import torch
 
 from adversary.crash.attack import AttackConfig
 from adversary.crash.generate import STEP_S, kinematic_excess
-from riskmap.sim.failures import MAX_BRAKE_MPS2, MAX_YAW_RATE_RADPS
+from riskmap.sim.records.failures import MAX_BRAKE_MPS2, MAX_YAW_RATE_RADPS
 
 
 def _track(speeds, headings):

@@ -10,13 +10,17 @@ import pytest
 from adversary.cli import main as adversary_main
 from adversary.crash.judge import box_iou, braking_track, judge, splice_tracks
 from adversary.crash.scenes import AttackScene, record_attack_scene
-from riskmap.sim.alternatives import alternative_track, first_clear_alternative, safest_clear_alternative
 from adversary.harden.dataset import ADVERSARIAL_GROUP, write_attack_shard, write_round_dataset
 from adversary.harden.loop import HardenConfig, round_sidecar
 from adversary.harden.windows import attacked_drive, hardening_windows
 from rasterize.errors import InputError
 from riskmap.data.dataset import DemoDataset
 from riskmap.registry import cached_planner
+from riskmap.sim.records.alternatives import (
+    alternative_track,
+    first_clear_alternative,
+    safest_clear_alternative,
+)
 
 DT = 0.1
 

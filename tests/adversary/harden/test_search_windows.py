@@ -10,7 +10,7 @@ from adversary.harden.loop import HardenConfig, round_search_windows
 from adversary.harden.search_windows import _drive, search_failure_windows
 from adversary.search.scenarios import get_template
 from rasterize.errors import InputError
-from riskmap.sim.metrics import box_iou
+from riskmap.sim.records.metrics import box_iou
 
 CV_CUT_IN = {"planner": "cv", "template": "cut_in", "seed": 0, "episode_s": 10.0}
 

@@ -7,7 +7,7 @@ from adversary.search.scenarios import Scenario, get_template
 
 
 def _setup(**changes):
-    from riskmap.sim.episode import make_env
+    from riskmap.sim.worlds.episode import make_env
 
     t = get_template("lead_brakes")
     p = t.as_dict(t.neutral)

@@ -10,7 +10,7 @@ from rasterize.frames import world_from_highway_env
 
 
 def _env():
-    from riskmap.sim.episode import make_env
+    from riskmap.sim.worlds.episode import make_env
 
     env = make_env("highway-v0", 10)
     env.unwrapped.config["vehicles_count"] = 0
@@ -41,7 +41,8 @@ def test_neutral_vector_reproduces_the_base_scene_in_closed_loop():
     """Driving the neutral vector (perception hook active) equals driving the base scene
     (no perception hook at all), step for step."""
     from riskmap.registry import make_planner
-    from riskmap.sim.rollout import DriveConfig, DriveHooks, drive_episode
+    from riskmap.sim.loop.rollout import DriveHooks
+    from riskmap.sim.worlds.highway_drive import DriveConfig, drive_episode
 
     t = get_template("cut_in")
     config = EvaluationConfig("cv", "cut_in", episode_s=6.0)

@@ -6,7 +6,7 @@ import pytest
 
 from riskmap.cli import main
 from riskmap.evaluation.check_planner import CheckConfig, check_planner, plan_problems
-from riskmap.sim.plan import Plan
+from riskmap.sim.loop.plan import Plan
 
 QUICK = CheckConfig(envs=("highway-v0",), episode_s=2.0)
 SPEC = "py:tests.broken_planners:Broken?fault={}"
@@ -19,7 +19,7 @@ SPEC = "py:tests.broken_planners:Broken?fault={}"
     ("shape", "shape (6, 2)"),
     ("raise", "plan() raised RuntimeError: this planner always fails"),
     ("unseeded", "same SPEC and seed"),
-    ("not_a_plan", "not a riskmap.sim.plan.Plan"),
+    ("not_a_plan", "not a riskmap.sim.loop.plan.Plan"),
     ("swapped_axes", "swapped axes"),
 ])
 def test_each_breach_is_named(fault, says):
@@ -106,7 +106,7 @@ class _Stuck(_Attached):
         self.calls = 0
 
     def plan(self, scene) -> Plan:
-        from riskmap.sim.plan import NoSolution
+        from riskmap.sim.loop.plan import NoSolution
 
         self.calls += 1
         if self.calls % 2 == 0:

@@ -9,9 +9,9 @@ from riskmap.data.collect import CollectConfig, run_episode
 from riskmap.evaluation.drive import drive
 from riskmap.figures.panels import missing_maps_note
 from riskmap.registry import make_planner
-from riskmap.sim.episode import make_env
-from riskmap.sim.plan import Plan
-from riskmap.sim.rollout import DriveConfig
+from riskmap.sim.loop.plan import Plan
+from riskmap.sim.worlds.episode import make_env
+from riskmap.sim.worlds.highway_drive import DriveConfig
 
 
 @pytest.mark.parametrize("human", ["yielding", "idm"])
@@ -55,7 +55,7 @@ def test_frames_of_a_planner_without_a_raster_and_of_one_that_makes_no_plans(tmp
 
 def test_drive_frames_of_cv_from_the_command_line(tmp_path, monkeypatch):
     from riskmap.cli import main
-    from riskmap.sim import rollout
+    from riskmap.sim.loop import rollout
 
     # The command line has no episode length: a 2 s highway episode keeps this to four frames.
     short = dataclasses.replace(rollout.FAMILY_SETUPS["highway"], episode_s=2.0)

@@ -8,9 +8,9 @@ from rasterize.errors import InputError
 from riskmap.cli import main
 from riskmap.evaluation.evaluate import evaluate
 from riskmap.evaluation.sources import EnvSource
-from riskmap.sim.episode import make_env
-from riskmap.sim.log_replay import HumanLog, LogReplayEpisode, ReplayPlanner, record_human_episode
-from riskmap.sim.rollout import DriveConfig, drive_episode
+from riskmap.sim.worlds.episode import make_env
+from riskmap.sim.worlds.highway_drive import DriveConfig, drive_episode
+from riskmap.sim.worlds.log_replay import HumanLog, LogReplayEpisode, ReplayPlanner, record_human_episode
 
 ENV = "intersection-v0"
 

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-import riskmap.sim.commonroad_replay as replay_module
+import riskmap.sim.worlds.commonroad_replay as replay_module
 from rasterize.errors import InputError
 from riskmap.cli import main
 from riskmap.evaluation.evaluate import evaluate

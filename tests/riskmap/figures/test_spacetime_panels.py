@@ -10,7 +10,7 @@ from rasterize.config import Extent, GridConfig, RasterConfig
 from rasterize.frames import ego_from_grid, grid_from_ego
 from riskmap.figures import panels
 from riskmap.figures.panels import has_spacetime, save_spacetime_strip
-from riskmap.sim.plan import Plan
+from riskmap.sim.loop.plan import Plan
 from tests.scenes import constant_velocity_scene
 
 G, T = 20, 12

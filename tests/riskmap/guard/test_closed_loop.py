@@ -9,11 +9,13 @@ from riskmap.guard.aggressors import GUARD_AGGRESSION, AggressorHook
 from riskmap.guard.guarded import GuardConfig, GuardedHumanDriver, GuardedPlanner, system2_config
 from riskmap.guard.system2 import DecelerationAgent, System2Config
 from riskmap.planner.baselines import ConstantVelocityPlanner
-from riskmap.sim.episode import make_env
-from riskmap.sim.plan import HumanDriver
-from riskmap.sim.rollout import DriveConfig, DriveHooks, drive_episode
+from riskmap.sim.loop.plan import HumanDriver
+from riskmap.sim.loop.rollout import DriveHooks
+from riskmap.sim.worlds.episode import make_env
 
 # Alert always on and every speed "high": every decision step is an intervention.
+from riskmap.sim.worlds.highway_drive import DriveConfig, drive_episode
+
 ALWAYS = GuardConfig(trigger="always", speed_threshold_mps={"highway": 1.0})
 CONFIG = DriveConfig("highway-v0", 1, seed=3, episode_s=3.0)
 
@@ -49,7 +51,7 @@ def test_aggressor_hook_installs_a_scripted_neighbour(env):
     hook = AggressorHook()
     drive_episode(env, HumanDriver(), DriveConfig("highway-v0", 1, seed=0, episode_s=1.0), 0, hooks=DriveHooks(on_ready=(hook,)))
     assert hook.aggressor is not None
-    # the toolkit's one aggressive driver (riskmap.sim.aggressive), aimed at the ego
+    # the toolkit's one aggressive driver (riskmap.sim.drivers.aggressive), aimed at the ego
     assert type(hook.aggressor).__name__ == "AggressiveVehicle"
     assert hook.aggressor.TIME_WANTED == hook.params.time_gap_s
     assert hook.aggressor.params == GUARD_AGGRESSION and hook.aggressor.params.pace_ahead_m == 5.0

@@ -6,9 +6,9 @@ import pytest
 
 from riskmap.guard.guarded import GuardConfig, GuardedPlanner, decelerated_waypoints, obstacle_ahead
 from riskmap.planner.baselines import ConstantVelocityPlanner
-from riskmap.sim.control import capped_accel
-from riskmap.sim.plan import Planner
-from riskmap.sim.world import recorded_history
+from riskmap.sim.loop.control import capped_accel
+from riskmap.sim.loop.plan import Planner
+from riskmap.sim.loop.world import recorded_history
 from tests.scenes import state
 
 REPO = Path(__file__).resolve().parents[3]
@@ -125,7 +125,7 @@ def test_unknown_trigger_is_an_input_error():
 def test_registry_builds_guarded_specs_with_the_shipped_checkpoint():
     from riskmap.guard.guarded import GuardedHumanDriver
     from riskmap.registry import make_planner
-    from riskmap.sim.plan import HumanDriver
+    from riskmap.sim.loop.plan import HumanDriver
 
     guarded_idm = make_planner("guard:idm")
     assert isinstance(guarded_idm, GuardedHumanDriver) and isinstance(guarded_idm, HumanDriver)
@@ -166,7 +166,7 @@ class FakeRecorder:
 
 
 class FakeRun:
-    """A closed-loop world at time 0 (`riskmap.sim.world.World`'s guard methods only) whose
+    """A closed-loop world at time 0 (`riskmap.sim.loop.world.World`'s guard methods only) whose
     recording shows the scene given."""
 
     def __init__(self, scene):

@@ -10,8 +10,8 @@ pytest.importorskip("agentspeak")
 from riskmap.guard.guarded import GuardConfig, GuardedHumanDriver, GuardedPlanner, system2_config
 from riskmap.guard.system2 import DecelerationAgent
 from riskmap.planner.baselines import ConstantVelocityPlanner
-from riskmap.sim.episode import make_env
-from riskmap.sim.rollout import DriveConfig, drive_episode
+from riskmap.sim.worlds.episode import make_env
+from riskmap.sim.worlds.highway_drive import DriveConfig, drive_episode
 
 # Every speed is "high", so that System 2 acts on each alert.
 CONFIG = GuardConfig(trigger="tgat", speed_threshold_mps={"highway": 1.0})

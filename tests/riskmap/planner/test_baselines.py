@@ -2,8 +2,8 @@ import numpy as np
 
 from riskmap.evaluation.drive import drive
 from riskmap.registry import make_planner
-from riskmap.sim.plan import Planner
-from riskmap.sim.rollout import DriveConfig
+from riskmap.sim.loop.plan import Planner
+from riskmap.sim.worlds.highway_drive import DriveConfig
 from tests.scenes import constant_velocity_scene
 
 

@@ -9,7 +9,7 @@ from rasterize.errors import InputError
 from riskmap.cli import main
 from riskmap.planner.bc import BCConfig, BCNet, _frame_scenes, bc_inputs
 from riskmap.registry import make_planner
-from riskmap.sim.plan import Planner
+from riskmap.sim.loop.plan import Planner
 from tests.scenes import UNIT_RASTER, constant_velocity_scene, straight_lane
 
 

@@ -17,11 +17,12 @@ from rasterize.commonroad import RecordedTraffic, load_scenario  # noqa: E402
 from rasterize.commonroad_compat import CustomState, Trajectory  # noqa: E402
 from riskmap.planner.commonroad_planner import CommonRoadPlanner, plan_from_trajectory  # noqa: E402
 from riskmap.registry import display_name, make_planner  # noqa: E402
-from riskmap.sim.commonroad_replay import replay_commonroad_episode  # noqa: E402
-from riskmap.sim.episode import make_env  # noqa: E402
-from riskmap.sim.plan import NoSolution, Plan, check_plan  # noqa: E402
-from riskmap.sim.plan_checks import implausible_note, plan_problems, summarise_implausible  # noqa: E402
-from riskmap.sim.rollout import DriveConfig, DriveHooks, drive_episode  # noqa: E402
+from riskmap.sim.loop.plan import NoSolution, Plan, check_plan  # noqa: E402
+from riskmap.sim.loop.plan_checks import implausible_note, plan_problems, summarise_implausible  # noqa: E402
+from riskmap.sim.loop.rollout import DriveHooks  # noqa: E402
+from riskmap.sim.worlds.commonroad_replay import replay_commonroad_episode  # noqa: E402
+from riskmap.sim.worlds.episode import make_env  # noqa: E402
+from riskmap.sim.worlds.highway_drive import DriveConfig, drive_episode
 
 HERE = "tests.riskmap.planner.test_commonroad_planner"
 RECORDING = Path(__file__).resolve().parents[2] / "fixtures" / "commonroad" / "USA_US101-4_1_T-1.xml"

@@ -1,9 +1,9 @@
-"""The one scripted aggressive driver (riskmap.sim.aggressive) on a straight two-lane road."""
+"""The one scripted aggressive driver (riskmap.sim.drivers.aggressive) on a straight two-lane road."""
 
 import numpy as np
 import pytest
 
-from riskmap.sim.aggressive import AggressiveParams, make_aggressive
+from riskmap.sim.drivers.aggressive import AggressiveParams, make_aggressive
 
 pytest.importorskip("highway_env")
 

@@ -13,15 +13,15 @@ from rasterize.commonroad import RecordedTraffic, load_scenario
 from rasterize.errors import InputError
 from rasterize.frames import world_from_highway_env
 from riskmap.planner.baselines import ConstantVelocityPlanner
-from riskmap.sim.commonroad_replay import (
+from riskmap.sim.loop.plan import Plan
+from riskmap.sim.loop.rollout import DriveHooks, LoopConfig, drive_world
+from riskmap.sim.worlds.commonroad_replay import (
     CommonRoadWorld,
     RecordedFuturePlanner,
     ReplayConfig,
     replay_commonroad_episode,
     road_from_lanelets,
 )
-from riskmap.sim.plan import Plan
-from riskmap.sim.rollout import DriveHooks, LoopConfig, drive_world
 
 RECORDING = Path(__file__).resolve().parents[2] / "fixtures" / "commonroad" / "USA_US101-4_1_T-1.xml"
 
@@ -71,7 +71,7 @@ def test_a_planner_that_ignores_the_slowing_leader_collides(traffic):
     result = replay_commonroad_episode(traffic, 475, ConstantVelocityPlanner())
     assert result["collided"] and result["min_gap_m"] == 0.0
     assert _who(result) == {"other_id": 468, "other_ahead": True}
-    assert result["collision"]["failure"]["fault"] == "at fault"          # classified (riskmap.sim.failures)
+    assert result["collision"]["failure"]["fault"] == "at fault"          # classified (riskmap.sim.records.failures)
     assert result["collision"]["failure"]["avoidable"]                    # braking for the leader would do
     assert result["simulated_s"] < 8.0
     assert result["ade_m"] > 1.0
@@ -127,7 +127,7 @@ def test_the_human_goal_is_where_the_recorded_vehicle_is_at_the_horizon(traffic)
     from rasterize.config import FAMILY_EXTENTS, GridConfig
     from rasterize.frames import ego_from_grid, ego_from_world, ego_pose
     from rasterize.maps import route_goal_cell
-    from riskmap.sim.commonroad_replay import ReplayConfig
+    from riskmap.sim.worlds.commonroad_replay import ReplayConfig
 
     vehicle = 475
     agent = traffic.index_of(vehicle)

@@ -3,7 +3,7 @@ import highway_env  # noqa: F401
 import numpy as np
 import pytest
 
-from riskmap.sim.control import TrackingController, planned_vehicle_class
+from riskmap.sim.loop.control import TrackingController, planned_vehicle_class
 
 
 def test_straight_plan_gives_straight_steering_and_the_plan_speed():

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from riskmap.sim import failures
-from riskmap.sim.failures import (
+from riskmap.sim.records import failures
+from riskmap.sim.records.failures import (
     MAX_LANES_PER_S,
     adversary_kinematics,
     attack_validity,
@@ -39,7 +39,7 @@ def braking_x(x0: float, v0: float, decel: float, steps: int, start_s: float = 0
 
 
 def first_overlap(states: np.ndarray, a: int, b: int) -> int:
-    from riskmap.sim.metrics import box_iou
+    from riskmap.sim.records.metrics import box_iou
 
     for k in range(states.shape[1]):
         if box_iou(states[a, k], SIZE, states[b, k], SIZE) > 0.02:
@@ -107,7 +107,7 @@ def test_a_leader_that_brakes_hard_in_a_short_gap_is_unavoidable_for_a_driver_wh
     out = classify_failure(states, valid, sizes, 0, 1, k, DT)
     assert out["fault"] == "at fault" and out["avoidable"] is False
     # STRIVE's hindsight check, 3 s before the collision whatever the ego could see, finds a way.
-    from riskmap.sim.alternatives import ego_only_solution
+    from riskmap.sim.records.alternatives import ego_only_solution
 
     assert ego_only_solution(states, valid, sizes, 0, k, DT)
 
@@ -172,7 +172,7 @@ def test_a_record_without_trajectories_is_unknown_never_guessed():
 
 
 def test_the_explanation_says_the_class_and_the_way_out():
-    from riskmap.sim.failures import failure_explanation, failure_words
+    from riskmap.sim.records.failures import failure_explanation, failure_words
 
     steps = 60
     t = DT * np.arange(steps)
@@ -189,7 +189,7 @@ def test_the_explanation_says_the_class_and_the_way_out():
 
 
 def test_a_crash_flag_without_overlap_finds_the_nearest_box_at_the_last_step():
-    from riskmap.sim.failures import first_contact
+    from riskmap.sim.records.failures import first_contact
 
     steps = 20
     t = DT * np.arange(steps)
@@ -202,7 +202,7 @@ def test_a_crash_flag_without_overlap_finds_the_nearest_box_at_the_last_step():
 
 
 def test_a_highway_env_lane_change_is_valid_under_the_simulators_limits_only():
-    from riskmap.sim.failures import CAR_LIMITS, HIGHWAY_ENV_LIMITS, kinematic_violations, revalidated
+    from riskmap.sim.records.failures import CAR_LIMITS, HIGHWAY_ENV_LIMITS, kinematic_violations, revalidated
 
     kin = {"min_accel_mps2": -2.0, "max_accel_mps2": 1.0, "max_lateral_accel_mps2": 11.0,
            "max_yaw_rate_radps": 0.6, "max_lanes_per_s": 0.7}          # what highway-env's MOBIL does

@@ -1,4 +1,4 @@
-"""riskmap.sim.fast_road: the same traffic as highway-env's own road, bit for bit.
+"""riskmap.sim.worlds.fast_road: the same traffic as highway-env's own road, bit for bit.
 
 Each scenario is driven twice from the same seed, on `make_env(fast=False)` and `fast=True`; every
 step, every vehicle's position, heading, speed, lanes, action, crash flag and pending impact must
@@ -12,16 +12,16 @@ import pytest
 
 pytest.importorskip("highway_env")
 
-from riskmap.sim import fast_road
-from riskmap.sim.aggressive import AggressiveParams, install_aggressive_neighbour
-from riskmap.sim.episode import Episode, make_env
-from riskmap.sim.fast_road.act_window import _ActWindow
-from riskmap.sim.fast_road.collisions import _collision_candidates
-from riskmap.sim.fast_road.gaps import _min_gap_reference
-from riskmap.sim.fast_road.right_of_way import _rectangles_known
-from riskmap.sim.plan import HumanDriver, Plan
-from riskmap.sim.rollout import DriveHooks, LoopConfig, drive_world
-from riskmap.sim.yielding import YieldingDriver
+from riskmap.sim.drivers.aggressive import AggressiveParams, install_aggressive_neighbour
+from riskmap.sim.drivers.yielding import YieldingDriver
+from riskmap.sim.loop.plan import HumanDriver, Plan
+from riskmap.sim.loop.rollout import DriveHooks, LoopConfig, drive_world
+from riskmap.sim.worlds import fast_road
+from riskmap.sim.worlds.episode import Episode, make_env
+from riskmap.sim.worlds.fast_road.act_window import _ActWindow
+from riskmap.sim.worlds.fast_road.collisions import _collision_candidates
+from riskmap.sim.worlds.fast_road.gaps import _min_gap_reference
+from riskmap.sim.worlds.fast_road.right_of_way import _rectangles_known
 
 
 def _bits(x) -> bytes:
@@ -220,7 +220,7 @@ def test_the_rectangle_shortcuts_agree_with_highway_env():
 
 
 def test_the_min_gap_is_the_reference_value():
-    from riskmap.sim.episode import min_gap_on_road
+    from riskmap.sim.worlds.episode import min_gap_on_road
 
     rng = np.random.default_rng(2)
     run = Episode(make_env("highway-v0", 10, fast=True), "highway-v0", 0, 0)

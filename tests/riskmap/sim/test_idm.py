@@ -1,4 +1,4 @@
-"""The one IDM law (riskmap.sim.idm) and its two users, against the formula written out here.
+"""The one IDM law (riskmap.sim.drivers.idm) and its two users, against the formula written out here.
 
 Reference (Treiber, Hennecke and Helbing 2000), in plain Python floats (IEEE float64):
 
@@ -13,9 +13,9 @@ import math
 
 import pytest
 
-from riskmap.sim.idm import GAP_FLOOR_M, idm_acceleration, idm_desired_gap
-from riskmap.sim.reactive_traffic import IdmParams
-from riskmap.sim.recorded_idm import IdmMobilParams, idm_accel
+from riskmap.sim.drivers.idm import GAP_FLOOR_M, idm_acceleration, idm_desired_gap
+from riskmap.sim.drivers.reactive_traffic import IdmParams
+from riskmap.sim.drivers.recorded_idm import IdmMobilParams, idm_accel
 
 SPEEDS = (0.0, 0.1, 1.0, 5.0, 10.0, 17.3, 29.9, 30.0, 36.0)
 GAPS = (None, 0.0, 0.0005, 0.5, 2.0, 8.0, 20.0, 55.0, 140.0)

@@ -5,7 +5,7 @@ import pytest
 
 from rasterize.frames import box_corners
 from rasterize.scene import Lane
-from riskmap.sim.metrics import (
+from riskmap.sim.records.metrics import (
     CAMPAIGN_COLLISION_TYPES,
     COLLISION_TYPES,
     ClosingSafetyConfig,

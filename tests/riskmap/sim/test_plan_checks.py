@@ -4,8 +4,8 @@ plan in world coordinates still is."""
 
 import numpy as np
 
-from riskmap.sim.plan import Plan
-from riskmap.sim.plan_checks import plan_problems
+from riskmap.sim.loop.plan import Plan
+from riskmap.sim.loop.plan_checks import plan_problems
 
 
 def test_an_overshoot_and_a_wrong_frame_are_told_apart():

@@ -3,7 +3,14 @@ the README's table made from that list."""
 
 from pathlib import Path
 
-from riskmap.sim.plan import HumanDriver, PlannerTraits, declarations_table, drives_itself, requires_log, traits_of
+from riskmap.sim.loop.plan import (
+    HumanDriver,
+    PlannerTraits,
+    declarations_table,
+    drives_itself,
+    requires_log,
+    traits_of,
+)
 
 REPO = Path(__file__).resolve().parents[3]
 

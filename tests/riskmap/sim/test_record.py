@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from riskmap.sim.record import CORE_FIELDS, EpisodeRecord, current_names
+from riskmap.sim.records.record import CORE_FIELDS, EpisodeRecord, current_names
 
 
 def _record(**changes) -> EpisodeRecord:

@@ -1,4 +1,4 @@
-"""`idm` on recordings: IDM + MOBIL along the recorded vehicle's lanelets (riskmap.sim.recorded_idm).
+"""`idm` on recordings: IDM + MOBIL along the recorded vehicle's lanelets (riskmap.sim.drivers.recorded_idm).
 
 Lane geometry is checked against the fixture's lanelet centre lines with plain numpy here, not
 with the module's own polyline code.
@@ -21,16 +21,16 @@ from rasterize.errors import InputError
 from rasterize.frames import world_from_ego
 from rasterize.scene import Scene
 from riskmap.planner.baselines import ConstantVelocityPlanner
-from riskmap.sim.commonroad_replay import CommonRoadWorld, ReplayConfig, replay_commonroad_episode
-from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS
-from riskmap.sim.recorded_idm import (
+from riskmap.sim.drivers.recorded_idm import (
     IdmMobilParams,
     LaneRoute,
     RecordedRouteIdmPlanner,
     idm_accel,
     recorded_lanelets,
 )
-from riskmap.sim.rollout import DriveHooks, LoopConfig, drive_world
+from riskmap.sim.loop.plan import PLAN_DT_S, PLAN_STEPS
+from riskmap.sim.loop.rollout import DriveHooks, LoopConfig, drive_world
+from riskmap.sim.worlds.commonroad_replay import CommonRoadWorld, ReplayConfig, replay_commonroad_episode
 
 RECORDING = Path(__file__).resolve().parents[2] / "fixtures" / "commonroad" / "USA_US101-4_1_T-1.xml"
 TIMES = PLAN_DT_S * np.arange(1, PLAN_STEPS + 1)

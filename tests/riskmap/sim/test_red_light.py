@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from riskmap.sim.metrics import stop_line_crossings
-from riskmap.sim.record import CORE_FIELDS, EpisodeRecord
+from riskmap.sim.records.metrics import stop_line_crossings
+from riskmap.sim.records.record import CORE_FIELDS, EpisodeRecord
 
 LINE = np.array([[0.0, 1.75], [0.0, -1.75]])
 EAST = np.array([1.0, 0.0])
@@ -47,7 +47,7 @@ def test_a_front_crossing_the_line_forwards_counts_once_at_the_interpolated_time
 pytest.importorskip("commonroad")
 
 from rasterize.commonroad import RecordedTraffic
-from riskmap.sim.commonroad_replay import (
+from riskmap.sim.worlds.commonroad_replay import (
     RecordedFuturePlanner,
     ReplayConfig,
     red_light_events,

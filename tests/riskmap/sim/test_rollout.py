@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from riskmap.sim.episode import Episode, cached_env
-from riskmap.sim.plan import Plan
-from riskmap.sim.rollout import DriveConfig, DriveHooks, drive_episode
+from riskmap.sim.loop.plan import Plan
+from riskmap.sim.loop.rollout import DriveHooks
+from riskmap.sim.worlds.episode import Episode, cached_env
+from riskmap.sim.worlds.highway_drive import DriveConfig, drive_episode
 
 ENV = "highway-v0"
 

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from riskmap.registry import make_planner
-from riskmap.sim.episode import Episode, cached_env
-from riskmap.sim.rollout import DriveHooks, LoopConfig, drive_world
-from riskmap.sim.yielding import GapAcceptance, _time_to_cover, conflict_stop_distance
+from riskmap.sim.drivers.yielding import GapAcceptance, _time_to_cover, conflict_stop_distance
+from riskmap.sim.loop.rollout import DriveHooks, LoopConfig, drive_world
+from riskmap.sim.worlds.episode import Episode, cached_env
 
 
 def test_time_to_cover_matches_kinematics():
@@ -67,7 +67,7 @@ def test_teacher_never_reverses():
 
 def test_yield_events_count_waits_for_crossing_traffic_only():
     from rasterize.scene import Scene
-    from riskmap.sim.yield_events import YieldEventCounter
+    from riskmap.sim.records.yield_events import YieldEventCounter
 
     def scene(other_xy, other_heading, other_speed=8.0):
         states = np.zeros((2, 1, 6))

@@ -16,7 +16,7 @@ from rasterize.commonroad import CommonRoadSceneConfig
 from riskmap.cli import main
 from riskmap.data.collect_commonroad import collect_commonroad
 from riskmap.planner.riskmap_planner import RiskMapPlanner
-from riskmap.sim.commonroad_replay import route_scene_config
+from riskmap.sim.worlds.commonroad_replay import route_scene_config
 from riskmap.training.config import TrainConfig
 from riskmap.training.train import train
 

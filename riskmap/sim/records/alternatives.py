@@ -1,6 +1,6 @@
 """Ego-only alternatives to a recorded drive, and STRIVE's solution check built on them.
 
-Both the solution check (here) and the avoidability of a failure (`riskmap.sim.failures`) ask
+Both the solution check (here) and the avoidability of a failure (`riskmap.sim.records.failures`) ask
 whether the ego alone, driving differently from some step on while everybody else does what
 they did, would have hit nobody.
 
@@ -24,7 +24,7 @@ import numpy as np
 
 from rasterize.frames import box_corners
 from rasterize.geometry import boxes_overlap
-from riskmap.sim.metrics import min_box_gap
+from riskmap.sim.records.metrics import min_box_gap
 
 DEFAULT_ACCELS_MPS2 = (-8.0, -6.0, -4.0, -2.0, 0.0, 1.0, 2.0, 3.0)
 

@@ -9,7 +9,7 @@ import operator
 
 import numpy as np
 
-from riskmap.sim.fast_road.tolerances import _TOL_M, _TOL_REL
+from riskmap.sim.worlds.fast_road.tolerances import _TOL_M, _TOL_REL
 
 # What highway-env's `IDMVehicle.act` calls on the deciding vehicle itself; one of them set on
 # the instance (or a vehicle of another class) makes its neighbour searches highway-env's own.

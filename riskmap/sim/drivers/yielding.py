@@ -26,7 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from riskmap.sim.plan import HumanDriver
+from riskmap.sim.loop.plan import HumanDriver
 
 
 @dataclass(frozen=True)

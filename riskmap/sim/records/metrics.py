@@ -17,7 +17,7 @@ Traffic lights:
   its heading) crosses a stop line forwards (from behind it to beyond it, in the lane's
   direction, within the line's two ends, heading within 60 degrees of the lane's). A red-light
   violation is such a crossing while the light governing the vehicle's turn is red (amber
-  counts as red), counted once per crossing (`riskmap.sim.commonroad_replay.red_light_events`).
+  counts as red), counted once per crossing (`riskmap.sim.worlds.commonroad_replay.red_light_events`).
 
 Box geometry:
 - box_gap (from rasterize.geometry): clearance between two boxes, 0 when they touch or overlap.

@@ -1,12 +1,12 @@
 """The rollout: one closed-loop episode with any planner driving the ego.
 
-`drive_world` is the one loop, on any `riskmap.sim.world.World`: an `Episode` (highway-env
+`drive_world` is the one loop, on any `riskmap.sim.loop.world.World`: an `Episode` (highway-env
 traffic, or `LogReplayEpisode` replaying a record) or a `CommonRoadWorld` (a CommonRoad
 recording). For a planner the ego is handed over at the start to a vehicle that a tracking
 controller drives at the control rate, replanning at `replan_hz` from a 2 s history.
-`drive_episode` drives an `Episode` and reports the highway-env metrics.
+`riskmap.sim.worlds.highway_drive.drive_episode` drives an `Episode` and reports the highway-env metrics.
 
-Every plan is checked against the planner contract (`riskmap.sim.plan_checks`): a plan that
+Every plan is checked against the planner contract (`riskmap.sim.loop.plan_checks`): a plan that
 cannot be tracked (wrong shape, NaN/inf) stops the episode; an implausible one (km/h, world
 coordinates, impossible speeds, swapped axes) is driven as made and counted in
 `LoopRecord.implausible`, which goes into the episode record (`implausible_plans` and
@@ -23,39 +23,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rasterize.config import family_of_env
 from rasterize.errors import InputError
 from rasterize.frames import ego_pose
-from rasterize.timebase import CONTROL_HZ, HISTORY_S, REPLAN_HZ
-from riskmap.sim.control import ControllerConfig, TrackingController
-from riskmap.sim.episode import FAMILY_SETUPS, Episode
-from riskmap.sim.plan import NoSolution, check_plan, traits_of
-from riskmap.sim.plan_checks import ImplausiblePlans
-from riskmap.sim.record import EpisodeRecord
-from riskmap.sim.yield_events import YieldEventCounter
-
-
-@dataclass(frozen=True)
-class DriveConfig:
-    env_id: str
-    episodes: int
-    seed: int = 0
-    control_hz: int = CONTROL_HZ
-    replan_hz: int = REPLAN_HZ
-    episode_s: float | None = None     # default: the family's episode length
-    gap_radius_m: float = 40.0         # others farther than this do not count for the min gap
-    history_s: float = HISTORY_S
-
-    def __post_init__(self) -> None:
-        family = family_of_env(self.env_id)
-        if self.episode_s is None:
-            object.__setattr__(self, "episode_s", FAMILY_SETUPS[family].episode_s)
-        check_replan_hz(self.replan_hz, self.control_hz)
-
-    def loop(self) -> LoopConfig:
-        """How `drive_world` drives one of these episodes: episode_s at the control rate."""
-        return LoopConfig(round(self.episode_s * self.control_hz), self.control_hz // self.replan_hz,
-                          self.history_s, self.gap_radius_m)
+from rasterize.timebase import HISTORY_S
+from riskmap.sim.loop.control import ControllerConfig, TrackingController
+from riskmap.sim.loop.plan import NoSolution, check_plan, traits_of
+from riskmap.sim.loop.plan_checks import ImplausiblePlans
+from riskmap.sim.records.yield_events import YieldEventCounter
 
 
 def check_replan_hz(replan_hz: int, control_hz: int) -> None:
@@ -172,7 +146,7 @@ class _Tracker:
 
 
 def drive_world(world, planner, config: LoopConfig, hooks: DriveHooks = DriveHooks()) -> LoopRecord:
-    """The closed loop on any `riskmap.sim.world.World`: hand the ego to `planner` (unless it
+    """The closed loop on any `riskmap.sim.loop.world.World`: hand the ego to `planner` (unless it
     drives itself), then step until `config.steps` or the world is done (`hooks`: `DriveHooks`,
     whose `setup` belongs to the world's construction and is not used here)."""
     if hooks.on_reset is not None:
@@ -211,26 +185,3 @@ def drive_world(world, planner, config: LoopConfig, hooks: DriveHooks = DriveHoo
     if hooks.on_end is not None:
         hooks.on_end(world, record)
     return record
-
-
-def drive_episode(env, planner, config: DriveConfig, episode: int, hooks: DriveHooks = DriveHooks(),
-                  run: Episode | None = None) -> dict:
-    """Drive one closed-loop episode; `hooks` perturb or observe it (see `DriveHooks`). `run`: an
-    already reset Episode to drive instead of a fresh one (for instance one whose traffic replays
-    a log; `hooks.setup` is then not used); the caller can read its recorder afterwards. Returns
-    the episode's `EpisodeRecord` as a dict (extras: episode, env_seed, driver)."""
-    if run is None:
-        run = Episode(env, config.env_id, config.seed, episode, config.control_hz,
-                      setup=hooks.setup)
-    return episode_record(run, planner, drive_world(run, planner, config.loop(), hooks), episode)
-
-
-def episode_record(run: Episode, planner, loop_record: LoopRecord, episode: int) -> dict:
-    """`drive_episode`'s record of `run` once `drive_world` drove it with `planner`: for callers
-    that run the loop on an `Episode` themselves, next to worlds of other kinds."""
-    record = EpisodeRecord.measured(
-        traits_of(planner).name if loop_record.drives_itself else type(planner).__name__, run.crashed, run.off_network,
-        round(run.time_s, 3), loop_record.distance_m, loop_record.speeds, loop_record.gaps,
-        loop_record.plan_times_s, extra={"episode": episode, "env_seed": run.seed, "driver": run.driver},
-        yield_events=loop_record.yield_events, **loop_record.implausible.fields())
-    return record.as_dict()

@@ -51,18 +51,18 @@ from rasterize.frames import (
 from rasterize.geometry import box_gap
 from rasterize.scene import STATE_DIM, Scene
 from rasterize.timebase import CONTROL_HZ, HISTORY_S, REPLAN_HZ
-from riskmap.sim.control import planned_vehicle_class
-from riskmap.sim.metrics import (
+from riskmap.sim.loop.control import planned_vehicle_class
+from riskmap.sim.records.metrics import (
     SafetyConfig,
     centre_off_lane,
     dangerous_encounters,
     safety_pct,
     stop_line_crossings,
 )
-from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, Plan, traits_of
-from riskmap.sim.reactive_traffic import ReactiveTraffic
-from riskmap.sim.record import EpisodeRecord
-from riskmap.sim.rollout import LoopConfig, check_replan_hz, drive_world
+from riskmap.sim.loop.plan import PLAN_DT_S, PLAN_STEPS, Plan, traits_of
+from riskmap.sim.drivers.reactive_traffic import ReactiveTraffic
+from riskmap.sim.records.record import EpisodeRecord
+from riskmap.sim.loop.rollout import LoopConfig, check_replan_hz, drive_world
 
 GOALS = ("route", "human")
 MODES = ("log", "reactive")
@@ -172,7 +172,7 @@ def _ego_scene(traffic: RecordedTraffic, ego: int, track_t: list[float], track: 
 
 class CommonRoadWorld:
     """Recorded vehicle `ego_id` of `traffic`, planner-driven from `start_s` among the replayed
-    others: a `riskmap.sim.world.World` (module docstring).
+    others: a `riskmap.sim.loop.world.World` (module docstring).
 
     The ego's track (`track_t` s, `track` [6] world states) is the recorded history up to the
     hand-over, then the closed loop; `driven()` is the closed-loop part. `n_steps`: steps to the
@@ -307,10 +307,10 @@ class CommonRoadWorld:
             self.off_network = True
 
     def classify_collision(self, agent: int, radius_m: float = 80.0) -> dict:
-        """`riskmap.sim.failures.classify_failure` of the ego's collision with `agent` (an index
+        """`riskmap.sim.records.failures.classify_failure` of the ego's collision with `agent` (an index
         into `traffic`) now, over the drive so far (history included) and every vehicle within
         `radius_m` now; lane changes are not tried (longitudinal alternatives only)."""
-        from riskmap.sim.failures import classify_failure
+        from riskmap.sim.records.failures import classify_failure
 
         times = np.asarray(self.track_t)
         ego = np.asarray(self.track).reshape(-1, STATE_DIM)
@@ -403,7 +403,7 @@ def _human_metrics(world: CommonRoadWorld) -> dict:
     human, _ = traffic.resample(np.array([ego]), driven_t)
     errors = [float(np.linalg.norm(mine - recorded))
               for mine, recorded in zip(driven[:, :2], human[0, :, :2])]
-    # Safety % as on simulated scenes (riskmap.sim.metrics): every driven step, every other recorded
+    # Safety % as on simulated scenes (riskmap.sim.records.metrics): every driven step, every other recorded
     # vehicle within the encounter radius is an encounter, dangerous when close or about to touch.
     other_states, other_present = world.others_at(world.others, driven_t)
     dangerous, encounters = dangerous_encounters(driven, np.asarray(traffic.sizes[ego]), other_states,

@@ -43,8 +43,8 @@ from rasterize.errors import InputError
 from rasterize.frames import ego_from_world
 from rasterize.geometry import Polyline, drop_repeats
 from rasterize.scene import Scene
-from riskmap.sim.idm import idm_acceleration, idm_desired_gap
-from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, Plan
+from riskmap.sim.drivers.idm import idm_acceleration, idm_desired_gap
+from riskmap.sim.loop.plan import PLAN_DT_S, PLAN_STEPS, Plan
 
 HORIZON_S = PLAN_STEPS * PLAN_DT_S
 PATH_STEP_M = 1.0          # spacing of the planned path's points
@@ -94,7 +94,7 @@ def idm_accel(speed: float, params: IdmMobilParams, gap: float | None = None,
 
     a = a_max [1 - (v / v0)^delta - (s* / s)^2], s* = s0 + max(0, v T + v (v - v_lead) / (2 sqrt(a b))),
     bounded below by the hardest braking (IDM's own term is unbounded as the gap closes).
-    The law is `riskmap.sim.idm`'s; a negative speed counts as 0 in the free-road term."""
+    The law is `riskmap.sim.drivers.idm`'s; a negative speed counts as 0 in the free-road term."""
     p = params
     desired = 0.0
     if gap is not None:

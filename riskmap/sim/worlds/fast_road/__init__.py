@@ -49,7 +49,7 @@ drives the same seeds with and without the upgrade and requires equal states, cr
 routes and scenes, and compares the neighbour searches and the right-of-way pair test with
 highway-env's on random scenes.
 
-Switch: `riskmap.sim.episode.make_env(env_id, fast=False)` builds a plain highway-env env, and
+Switch: `riskmap.sim.worlds.episode.make_env(env_id, fast=False)` builds a plain highway-env env, and
 so does the environment variable RISKMAP_FAST_ROAD=0 for every env made without an explicit
 `fast`. Only highway-env 1.12's `Road` and `RegulatedRoad` (exactly those classes) are upgraded,
 since the shortcuts rely on what that version's methods compute; any other road is left as it is.
@@ -59,9 +59,9 @@ classes; imports highway-env), `lanes` (the closest-lane search), `act_window`, 
 `right_of_way`, `gaps` (`min_gap_on_road`), `tolerances` (the rounding margins).
 """
 
-from riskmap.sim.fast_road.gaps import min_gap_on_road
-from riskmap.sim.fast_road.switch import ENV_VAR, fast_by_default, is_fast
-from riskmap.sim.fast_road.upgrade import SUPPORTED_HIGHWAY_ENV, _classes, install, upgrade_road
+from riskmap.sim.worlds.fast_road.gaps import min_gap_on_road
+from riskmap.sim.worlds.fast_road.switch import ENV_VAR, fast_by_default, is_fast
+from riskmap.sim.worlds.fast_road.upgrade import SUPPORTED_HIGHWAY_ENV, _classes, install, upgrade_road
 
 __all__ = ["ENV_VAR", "SUPPORTED_HIGHWAY_ENV", "fast_by_default", "install", "is_fast", "min_gap_on_road",
            "upgrade_road"]

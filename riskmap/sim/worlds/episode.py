@@ -13,10 +13,10 @@ import numpy as np
 from rasterize.config import family_of_env
 from rasterize.scene import Scene
 from rasterize.timebase import CONTROL_HZ
-from riskmap.sim import fast_road
-from riskmap.sim.control import hand_over_to_planner
-from riskmap.sim.metrics import centre_off_lane, min_box_gap, vehicle_box
-from riskmap.sim.world import recorded_history
+from riskmap.sim.worlds import fast_road
+from riskmap.sim.loop.control import hand_over_to_planner
+from riskmap.sim.records.metrics import centre_off_lane, min_box_gap, vehicle_box
+from riskmap.sim.loop.world import recorded_history
 
 
 @dataclass(frozen=True)
@@ -59,7 +59,7 @@ def episode_seed(seed: int, episode: int) -> int:
 
 def make_env(env_id: str, record_hz: int = CONTROL_HZ, fast: bool | None = None):
     """The gymnasium env of `env_id`, simulated at `record_hz`, with its roads upgraded to
-    `riskmap.sim.fast_road`'s (same physics, less time) unless `fast` is False; `fast=None`
+    `riskmap.sim.worlds.fast_road`'s (same physics, less time) unless `fast` is False; `fast=None`
     follows the environment variable RISKMAP_FAST_ROAD (on unless set to 0)."""
     import warnings
 
@@ -163,7 +163,7 @@ class Episode:
     `step()` advances the road by 1 / rate_hz seconds: every vehicle acts (the ego too, whatever
     vehicle drives it), then once a second vehicles far from the ego are dropped and, where the
     family has a spawner, new traffic arrives. `done` once the ego crashed or left the network.
-    A `riskmap.sim.world.World`: the planner's scenes come from the recorder.
+    A `riskmap.sim.loop.world.World`: the planner's scenes come from the recorder.
     """
 
     def __init__(self, env, env_id: str, seed: int, episode: int, rate_hz: int = CONTROL_HZ,
@@ -171,7 +171,7 @@ class Episode:
         """`setup(base_env)`, if given, rearranges the road after the human ego is installed and
         before anything is recorded (scenario templates set their initial conditions there).
         `static_agents`: parked / stopped vehicles added after that
-        (`riskmap.sim.static_agents`), placed by a generator of (seed, episode) alone, so that a
+        (`riskmap.sim.drivers.static_agents`), placed by a generator of (seed, episode) alone, so that a
         re-simulation of the episode puts them at the same places."""
         from rasterize.highway import TrafficRecorder
 
@@ -187,7 +187,7 @@ class Episode:
             setup(self.base)
         self.static_agents = static_agents
         if static_agents:
-            from riskmap.sim.static_agents import place_static_vehicles
+            from riskmap.sim.drivers.static_agents import place_static_vehicles
 
             place_static_vehicles(self.base.road, self.ego, family_of_env(env_id), static_agents,
                                   np.random.default_rng([seed, episode, 2]))

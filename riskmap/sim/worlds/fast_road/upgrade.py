@@ -1,4 +1,4 @@
-"""Upgrading a highway-env env's roads in place to the fast classes (`riskmap.sim.fast_road.roads`,
+"""Upgrading a highway-env env's roads in place to the fast classes (`riskmap.sim.worlds.fast_road.roads`,
 imported only once highway-env 1.12 is found)."""
 
 from __future__ import annotations
@@ -64,7 +64,7 @@ def _classes() -> dict | None:
         return None
 
     # The classes subclass highway-env's, which is imported only once episodes run.
-    from riskmap.sim.fast_road.roads import FastRegulatedRoad, FastRoad, FastRoadNetwork
+    from riskmap.sim.worlds.fast_road.roads import FastRegulatedRoad, FastRoad, FastRoadNetwork
 
     _CLASSES = {"Road": Road, "RegulatedRoad": RegulatedRoad, "RoadNetwork": RoadNetwork,
                 "FastRoad": FastRoad, "FastRegulatedRoad": FastRegulatedRoad,

@@ -1,4 +1,4 @@
-"""What the closed loop (`riskmap.sim.rollout.drive_world`) needs from a world it drives the ego in.
+"""What the closed loop (`riskmap.sim.loop.rollout.drive_world`) needs from a world it drives the ego in.
 
 Worlds: `Episode` (highway-env traffic), `LogReplayEpisode` (traffic replaying a recorded
 episode) and `CommonRoadWorld` (a CommonRoad recording on a road built from its lanelets). The

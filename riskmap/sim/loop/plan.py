@@ -1,7 +1,7 @@
 """The planner contract: the `Plan` a planner returns, the `Planner` protocol, and its checks.
 
 Every planner that can drive the ego implements `reset(scene)` and `plan(scene) -> Plan`; the
-rollout (`riskmap.sim.rollout`) replans at 2 Hz and tracks the waypoints with a controller.
+rollout (`riskmap.sim.loop.rollout`) replans at 2 Hz and tracks the waypoints with a controller.
 `HumanDriver` marks the IDM/MOBIL ego, which drives itself (`drives_itself`) and makes no plan.
 
 A plan has two forms: the classic one, 12 waypoints 0.5 s apart (`Plan.dt_s` at its default,
@@ -129,7 +129,7 @@ class PlannerTraits:
 
     drives_itself: bool = _declared(
         False, "the world's own IDM/MOBIL ego keeps driving; `plan` is never called",
-        "riskmap.sim.rollout, riskmap.registry, riskmap.guard.guarded, check-planner")
+        "riskmap.sim.loop.rollout, riskmap.registry, riskmap.guard.guarded, check-planner")
     requires_log: bool = _declared(
         False, "needs the recorded episode: `set_log(log)` is called before it drives",
         "riskmap.evaluation.evaluate")
@@ -138,16 +138,16 @@ class PlannerTraits:
         "riskmap.evaluation.evaluate")
     attach: Callable | None = _declared(
         None, "`attach(world)`: called once the ego is set up, before the first step",
-        "riskmap.sim.rollout")
+        "riskmap.sim.loop.rollout")
     name: str = _declared(
         "idm", "the name records give a planner that drives itself (others: their class name)",
-        "riskmap.sim.rollout")
+        "riskmap.sim.loop.rollout")
     raster: object | None = _declared(
         None, "its `RasterConfig`: plan figures are drawn on it (else the family's extent)",
         "riskmap.figures.panels, riskmap.guard.guarded")
     route_settings: dict | None = _declared(
         None, "the route rule of its recorded training data, used on CommonRoad recordings",
-        "riskmap.sim.commonroad_replay, adversary.harden.windows")
+        "riskmap.sim.worlds.commonroad_replay, adversary.harden.windows")
     guard: object | None = _declared(
         None, "its `riskmap.guard.guarded.Guard`: attack records report the guard's counts",
         "adversary.attacks.episode")

@@ -15,7 +15,7 @@ import numpy as np
 from rasterize.commonroad.tracks import RecordedTraffic
 from rasterize.geometry import Polyline, arc_lengths
 from rasterize.scene import STATE_DIM
-from riskmap.sim.idm import idm_acceleration, idm_desired_gap
+from riskmap.sim.drivers.idm import idm_acceleration, idm_desired_gap
 
 
 @dataclass(frozen=True)
@@ -33,13 +33,13 @@ class IdmParams:
     min_desired_speed_mps: float = 0.1   # keeps the free-road term finite where the log stood still
 
     def desired_gap(self, speed: float, closing: float) -> float:
-        """s* (m) at `speed` closing in on the ego at `closing` m/s (`riskmap.sim.idm`)."""
+        """s* (m) at `speed` closing in on the ego at `closing` m/s (`riskmap.sim.drivers.idm`)."""
         return idm_desired_gap(speed, closing, min_gap_m=self.min_gap_m, headway_s=self.headway_s,
                                max_accel_mps2=self.max_accel_mps2, comfort_decel_mps2=self.comfort_decel_mps2)
 
     def accel(self, speed: float, desired_speed: float, gap: float | None = None,
               desired_gap: float = 0.0) -> float:
-        """IDM acceleration (`riskmap.sim.idm`, exponent 4): free road towards `desired_speed`
+        """IDM acceleration (`riskmap.sim.drivers.idm`, exponent 4): free road towards `desired_speed`
         (at least `min_desired_speed_mps`), plus the ego term with s* = `desired_gap` when `gap`
         is set."""
         return idm_acceleration(speed, max(desired_speed, self.min_desired_speed_mps),

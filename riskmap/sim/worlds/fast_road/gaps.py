@@ -6,15 +6,15 @@ import math
 
 import numpy as np
 
-from riskmap.sim.fast_road.tolerances import _TOL_M, _TOL_REL
+from riskmap.sim.worlds.fast_road.tolerances import _TOL_M, _TOL_REL
 
 
 def min_gap_on_road(road, ego, radius_m: float) -> float:
-    """`riskmap.sim.episode.min_gap_on_road`, the same value. Box gaps are measured in the order
+    """`riskmap.sim.worlds.episode.min_gap_on_road`, the same value. Box gaps are measured in the order
     of a lower bound (the larger of the centre distance less both half diagonals and the boxes'
     separation along the ego's two axes), and only while that bound does not exceed the smallest
     gap found so far."""
-    from riskmap.sim.metrics import box_gap, vehicle_box
+    from riskmap.sim.records.metrics import box_gap, vehicle_box
 
     try:
         ex, ey = float(ego.position[0]), float(ego.position[1])
@@ -61,7 +61,7 @@ def min_gap_on_road(road, ego, radius_m: float) -> float:
 
 
 def _min_gap_reference(road, ego, radius_m: float) -> float:
-    from riskmap.sim.metrics import min_box_gap, vehicle_box
+    from riskmap.sim.records.metrics import min_box_gap, vehicle_box
 
     return min_box_gap(vehicle_box(ego), (vehicle_box(v) for v in road.vehicles
                                           if v is not ego and np.linalg.norm(v.position - ego.position) < radius_m))

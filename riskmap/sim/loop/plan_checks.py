@@ -2,17 +2,17 @@
 
 `plan_problems` says what is wrong with a plan: not a `Plan`, wrong shape, NaN/inf, km/h instead
 of m/s, world instead of ego coordinates, impossible speeds, swapped or backward axes. The
-rollout (`riskmap.sim.rollout`) runs it on every plan a planner makes and counts the failures in
+rollout (`riskmap.sim.loop.rollout`) runs it on every plan a planner makes and counts the failures in
 `ImplausiblePlans`; `riskmap check-planner` names them one line each. A check is a few numpy
 operations on 12 points (microseconds), against a replan period of 500 ms.
 
 An implausible plan is still driven as made (the loop's tracking controller follows it): the
 count says a run's numbers came from plans that break the contract, without changing the numbers
 of any planner that keeps it. Wrong shape or non-finite waypoints cannot be tracked at all and
-stop the episode (`riskmap.sim.plan.check_plan`).
+stop the episode (`riskmap.sim.loop.plan.check_plan`).
 
 A timed plan (`Plan.dt_s`, `Plan.speeds`: any step >= 0.1 s) is checked the same way at its own
-step. A planner that raises `riskmap.sim.plan.NoSolution` (or, through an adapter, returns no
+step. A planner that raises `riskmap.sim.loop.plan.NoSolution` (or, through an adapter, returns no
 trajectory) made no plan: that is counted beside the implausible plans, in `no_solution` of the
 same `ImplausiblePlans` (records: `no_solution_plans`, `no_solution_first`), so that it reaches
 every record and summary the implausible count reaches; the loop brakes meanwhile.
@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from riskmap.sim.plan import Plan, shape_problem
+from riskmap.sim.loop.plan import Plan, shape_problem
 
 MAX_SPEED_MS = 60.0          # faster than any road vehicle here: the waypoints are not metres
 MAX_ACCEL_MS2 = 10.0         # beyond hard braking: the first waypoint does not start at the ego
@@ -35,7 +35,7 @@ KMH_PER_MS = 3.6
 def plan_problems(plan, speed: float) -> list[str]:
     """What is wrong with `plan` made at ego speed `speed` (m/s); empty if nothing."""
     if not isinstance(plan, Plan):
-        return [f"plan() returned a {type(plan).__name__}, not a riskmap.sim.plan.Plan"]
+        return [f"plan() returned a {type(plan).__name__}, not a riskmap.sim.loop.plan.Plan"]
     try:
         problem = shape_problem(plan)
     except (TypeError, ValueError):
@@ -102,7 +102,7 @@ def _speed_problems(speeds) -> list[str]:
     return []
 
 
-# The record fields of the counts (`riskmap.sim.record.EpisodeRecord`).
+# The record fields of the counts (`riskmap.sim.records.record.EpisodeRecord`).
 COUNT_FIELD, FIRST_FIELD = "implausible_plans", "implausible_plan_first"
 NO_SOLUTION_FIELD, NO_SOLUTION_FIRST_FIELD = "no_solution_plans", "no_solution_first"
 
@@ -111,7 +111,7 @@ NO_SOLUTION_FIELD, NO_SOLUTION_FIRST_FIELD = "no_solution_plans", "no_solution_f
 class ImplausiblePlans:
     """The plans of one episode (or several drives) that fail `plan_problems`: how many, and the
     first one's problems with the time of the scene it was made from; and the replans at which
-    the planner had no plan at all (`no_solution`, `riskmap.sim.plan.NoSolution`), with the first
+    the planner had no plan at all (`no_solution`, `riskmap.sim.loop.plan.NoSolution`), with the first
     one's time and reason."""
 
     count: int = 0

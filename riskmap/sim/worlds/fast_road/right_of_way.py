@@ -7,8 +7,8 @@ import math
 
 import numpy as np
 
-from riskmap.sim.fast_road.act_window import _states
-from riskmap.sim.fast_road.tolerances import _TOL_M, _TOL_REL
+from riskmap.sim.worlds.fast_road.act_window import _states
+from riskmap.sim.worlds.fast_road.tolerances import _TOL_M, _TOL_REL
 
 # The horizon and step `RegulatedRoad.enforce_road_rules` predicts over (is_conflict_possible's
 # defaults; `roads` checks them).

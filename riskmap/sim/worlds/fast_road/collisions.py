@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 
-from riskmap.sim.fast_road.tolerances import _TOL_M, _TOL_REL
+from riskmap.sim.worlds.fast_road.tolerances import _TOL_M, _TOL_REL
 
 
 def _collision_candidates(vehicles: list, members: list, dt: float) -> list | None:

@@ -217,7 +217,7 @@ def make_aggressive(vehicle, target_of, params: AggressiveParams, dt_s: float = 
 
 
 def install_aggressive_neighbour(run, params: AggressiveParams):
-    """Turn the neighbour that `params.selection` picks in `run` (a `riskmap.sim.episode.Episode`)
+    """Turn the neighbour that `params.selection` picks in `run` (a `riskmap.sim.worlds.episode.Episode`)
     into an `AggressiveVehicle` aimed at the ego; returns it, or None when nobody qualifies.
 
     The ego is looked up at every step (`run.ego`): a guard or planner may replace the ego

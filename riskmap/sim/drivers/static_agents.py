@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from rasterize.errors import InputError
-from riskmap.sim.metrics import min_box_gap, vehicle_box
+from riskmap.sim.records.metrics import min_box_gap, vehicle_box
 
 STATIC_FAMILIES = ("highway", "intersection")   # the families with a placement rule
 # More do not fit around the ego in most highway episodes (12: 4 of 40 episodes of seed 500 have

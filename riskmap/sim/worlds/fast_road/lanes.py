@@ -7,7 +7,7 @@ import math
 
 import numpy as np
 
-from riskmap.sim.fast_road.tolerances import _TOL_M, _TOL_REL
+from riskmap.sim.worlds.fast_road.tolerances import _TOL_M, _TOL_REL
 
 
 def _lane_bounds(lane, straight, sine, circular) -> tuple[float, float, float, float, float] | None:

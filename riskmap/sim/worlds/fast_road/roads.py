@@ -1,5 +1,5 @@
 """The fast road's classes: `FastRoadNetwork`, `FastRoad` and `FastRegulatedRoad`, subclasses of
-highway-env 1.12's. Importing this module imports highway-env; `riskmap.sim.fast_road.upgrade`
+highway-env 1.12's. Importing this module imports highway-env; `riskmap.sim.worlds.fast_road.upgrade`
 imports it only once that version is found."""
 
 from __future__ import annotations
@@ -16,11 +16,11 @@ from highway_env.vehicle.controller import ControlledVehicle
 from highway_env.vehicle.kinematics import Vehicle
 from highway_env.vehicle.objects import Landmark, RoadObject
 
-from riskmap.sim.fast_road.act_window import _IDM_METHODS, _ActWindow
-from riskmap.sim.fast_road.collisions import _collision_candidates
-from riskmap.sim.fast_road.lanes import _LaneFinder
-from riskmap.sim.fast_road.right_of_way import _HORIZON, _STEP, _RuleCheck
-from riskmap.sim.fast_road.switch import ENV_VAR
+from riskmap.sim.worlds.fast_road.act_window import _IDM_METHODS, _ActWindow
+from riskmap.sim.worlds.fast_road.collisions import _collision_candidates
+from riskmap.sim.worlds.fast_road.lanes import _LaneFinder
+from riskmap.sim.worlds.fast_road.right_of_way import _HORIZON, _STEP, _RuleCheck
+from riskmap.sim.worlds.fast_road.switch import ENV_VAR
 
 stock_handle, stock_colliding = RoadObject.handle_collisions, RoadObject._is_colliding
 pure_predictions = (ControlledVehicle.predict_trajectory_constant_speed,

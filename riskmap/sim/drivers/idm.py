@@ -1,8 +1,8 @@
 """The Intelligent Driver Model (Treiber, Hennecke and Helbing 2000): the one longitudinal law.
 
 Both IDM users call these two functions with their own parameters: the reactive recorded
-traffic (`riskmap.sim.reactive_traffic.IdmParams`) and the `idm` baseline on recordings
-(`riskmap.sim.recorded_idm.idm_accel`).
+traffic (`riskmap.sim.drivers.reactive_traffic.IdmParams`) and the `idm` baseline on recordings
+(`riskmap.sim.drivers.recorded_idm.idm_accel`).
 
     s*(v, dv) = s0 + max(0, v T + v dv / (2 sqrt(a b)))              desired gap
     dv/dt     = max(-b_max, a [1 - (v / v0)^delta - (s* / s)^2])     acceleration

@@ -25,7 +25,7 @@ avoidable (`avoidability`): a driver who reacts to what can be seen could have a
   `VISIBILITY_HORIZON_S` (3 s, checked every 0.1 s; an overlap now counts). A threat that
   no constant-velocity prediction saw coming is visible only at the collision.
 - The ego reacts `REACTION_S` (0.5 s) later. From its recorded state then, it tries each
-  alternative (`riskmap.sim.alternatives.alternative_track`): the constant accelerations
+  alternative (`riskmap.sim.records.alternatives.alternative_track`): the constant accelerations
   `AVOID_ACCELS_MPS2` along its own recorded path (braking profiles, holding speed, speeding up)
   and, where the caller can say what is on the road (`on_road`), a lane change of one lane
   width left or right, blended in over 2 s, with `AVOID_LANE_CHANGE_ACCELS_MPS2`.
@@ -61,8 +61,8 @@ import numpy as np
 
 from rasterize.frames import box_corners
 from rasterize.geometry import box_gap, boxes_overlap
-from riskmap.sim.alternatives import first_clear_alternative
-from riskmap.sim.metrics import STRIVE, box_iou, in_frame, overlap_within
+from riskmap.sim.records.alternatives import first_clear_alternative
+from riskmap.sim.records.metrics import STRIVE, box_iou, in_frame, overlap_within
 
 FAULTS = ("at fault", "struck from behind", "side")
 UNKNOWN = "unknown"            # the class of a record without trajectories
@@ -433,12 +433,12 @@ def failure_explanation(failure: dict | None) -> str | None:
 
 def classify_run(run, adversary=None, contact: tuple[int, int] | None = None,
                  adversary_off_road: bool | None = None) -> dict | None:
-    """`classify_failure` of a highway-env episode's collision (`riskmap.sim.episode.Episode`:
+    """`classify_failure` of a highway-env episode's collision (`riskmap.sim.worlds.episode.Episode`:
     its recorder, road and ego): `contact` (step, recorder agent), else the first box contact
     (`first_contact`, crash-flagged); an attack when the partner is `adversary` (a highway-env
     vehicle), held to HIGHWAY_ENV_LIMITS; lane changes on the road network. None when no contact
     is found."""
-    from riskmap.sim.metrics import lane_width_at, on_network
+    from riskmap.sim.records.metrics import lane_width_at, on_network
 
     states, valid, sizes, _ = run.recorder.arrays()
     ego = run.recorder.ego_id

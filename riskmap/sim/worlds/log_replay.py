@@ -21,11 +21,11 @@ from rasterize.frames import ego_from_world, heading_angle, highway_env_from_wor
 from rasterize.scene import Scene
 from rasterize.timebase import CONTROL_HZ
 from riskmap.infra.atomic import write_npz
-from riskmap.sim.episode import FAMILY_SETUPS, Episode
-from riskmap.sim.metrics import centre_off_lane
-from riskmap.sim.plan import PLAN_DT_S, PLAN_STEPS, Plan
-from riskmap.sim.rollout import LoopConfig, drive_world
-from riskmap.sim.yielding import demonstrator
+from riskmap.sim.worlds.episode import FAMILY_SETUPS, Episode
+from riskmap.sim.records.metrics import centre_off_lane
+from riskmap.sim.loop.plan import PLAN_DT_S, PLAN_STEPS, Plan
+from riskmap.sim.loop.rollout import LoopConfig, drive_world
+from riskmap.sim.drivers.yielding import demonstrator
 
 
 @dataclass(frozen=True)

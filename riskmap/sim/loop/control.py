@@ -46,7 +46,7 @@ class TrackingController:
     def set_plan(self, waypoints_ego: np.ndarray, origin: np.ndarray, heading: float,
                  dt_s: float = PLAN_DT_S, speeds: np.ndarray | None = None) -> None:
         """Pin a plan made at `origin`/`heading`: waypoints `dt_s` apart (s), with the speed at
-        each (m/s) or None to take the speeds their spacing implies (`riskmap.sim.plan.Plan`)."""
+        each (m/s) or None to take the speeds their spacing implies (`riskmap.sim.loop.plan.Plan`)."""
         pts = np.concatenate([[[0.0, 0.0]], np.asarray(waypoints_ego, dtype=np.float64)])
         self.path = world_from_ego(pts, origin, heading)
         self._line = Polyline(self.path)
@@ -62,7 +62,7 @@ class TrackingController:
             self._knot0 = self._dt
 
     def brake(self) -> None:
-        """Stop on the spot: the planner had no plan (`riskmap.sim.plan.NoSolution`), so brake at
+        """Stop on the spot: the planner had no plan (`riskmap.sim.loop.plan.NoSolution`), so brake at
         the hardest rate, wheels straight, until the next plan."""
         self._braking = True
 
@@ -126,7 +126,7 @@ class TrackingController:
 
 
 def capped_accel(accel: float, cap) -> float:
-    """`accel` held at most `cap()` (`riskmap.sim.world.World.cap_ego_accel`); as asked where
+    """`accel` held at most `cap()` (`riskmap.sim.loop.world.World.cap_ego_accel`); as asked where
     there is no cap or `cap()` is None."""
     limit = None if cap is None else cap()
     return accel if limit is None else min(accel, limit)

@@ -42,11 +42,11 @@ class EpisodeRecord:
     red_light_violations: int = 0
     # Times the ego waited (speed < 0.5 m/s for >= 1 s) while a crossing vehicle passed ahead of it.
     yield_events: int = 0
-    # Plans that failed the planner contract's checks (`riskmap.sim.plan_checks`; driven as made)
+    # Plans that failed the planner contract's checks (`riskmap.sim.loop.plan_checks`; driven as made)
     # and the first one's problems with the time it was made. 0 and None where nothing planned.
     implausible_plans: int = 0
     implausible_plan_first: str | None = None
-    # Replans at which the planner had no plan (`riskmap.sim.plan.NoSolution`, or an adapted
+    # Replans at which the planner had no plan (`riskmap.sim.loop.plan.NoSolution`, or an adapted
     # planner's empty trajectory; the ego braked) and the first one's time and reason.
     no_solution_plans: int = 0
     no_solution_first: str | None = None

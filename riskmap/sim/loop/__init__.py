@@ -1,0 +1,1 @@
+"""The closed-loop contract and the one loop (see `riskmap.sim`)."""

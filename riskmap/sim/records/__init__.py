@@ -1,0 +1,1 @@
+"""What a drive leaves: the record, the metrics, the failures that count (see `riskmap.sim`)."""

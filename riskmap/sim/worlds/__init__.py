@@ -1,0 +1,1 @@
+"""The worlds the ego is driven in (see `riskmap.sim`)."""
