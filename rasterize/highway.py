@@ -102,7 +102,7 @@ def lanes_near(network, centre_world: np.ndarray, sampling: LaneSampling = LaneS
     centre_hw = world_from_highway_env(centre_world)
     radius = sampling.radius_m
     batch = {}
-    if getattr(network, "fast_road", False):     # riskmap.sim.fast_road: the same points, at once
+    if getattr(network, "fast_road", False):     # riskmap.sim.worlds.fast_road: the same points, at once
         from highway_env.road.lane import CircularLane, StraightLane
 
         batch = {StraightLane: _sample_straight_lane, CircularLane: _sample_circular_lane}
@@ -184,7 +184,7 @@ def route_ahead(road, vehicle, rule: RouteRule = RouteRule()) -> np.ndarray:
     s0 = float(lane.local_coordinates(vehicle.position)[0])
     route = _route_lanes(network, vehicle, s0 + reach)
     along = np.arange(0.0, reach + rule.sample_m, rule.sample_m)
-    # A fast road (riskmap.sim.fast_road) gives the same points and the same leaders with less
+    # A fast road (riskmap.sim.worlds.fast_road) gives the same points and the same leaders with less
     # work: its network places the route's straight stretches at once, and only the vehicles that
     # come within lane_half_width_m of the route (with a margin) are examined.
     fast = bool(getattr(road, "fast_road", False)) and hasattr(network, "positions_along_route")
@@ -367,7 +367,7 @@ class TrafficRecorder:
         self.ego_id  # the ego is always known, even before it moves
         if self.route_rule is not None and getattr(self.ego, "lane_index", None) is not None:
             if getattr(self.road, "fast_road", False):
-                # riskmap.sim.fast_road: keep what route_ahead reads, compute it if a scene asks.
+                # riskmap.sim.worlds.fast_road: keep what route_ahead reads, compute it if a scene asks.
                 self._routes[step] = _RouteLater(self.road, self.ego, self.route_rule)
             else:
                 self._routes[step] = route_ahead(self.road, self.ego, self.route_rule)
