@@ -34,7 +34,7 @@ from adversary.crash.guard_data import read_attack_run
 from adversary.crash.redrive import redrive_attack
 from adversary.crash.run import run_attacks
 from adversary.crash.scenes import load_record
-from riskmap.evaluation.guard_tables import intervention_totals, print_table, ratio_cell
+from riskmap.evaluation.guard_tables import intervention_totals, markdown_table, print_table, ratio_cell
 from riskmap.infra.atomic import write_json
 from riskmap.infra.stats import wilson
 from riskmap.planner.shipped import shipped_spec
@@ -99,15 +99,18 @@ def summarise(count: int | None = None) -> list[dict]:
     return rows
 
 
+COLUMNS = ("family", "planner", "variant", "scenes", "collisions with adversary [95% CI]", "any collision",
+           "progress (m, 6 s)", "interventions / frames", "BDI ratio")
+
+
 def markdown(rows: list[dict]) -> str:
-    lines = ["| family | planner | variant | scenes | collisions with adversary [95% CI] | any collision | "
-             "progress (m, 6 s) | interventions / frames | BDI ratio |", "|" + "---|" * 9]
-    for r in rows:
+    def cells(r: dict) -> tuple:
         c = r["collision"]
-        lines.append(f"| {r['family']} | {r['inner']} | {r['variant']} | {r['scenes']} | {c['k']} "
-                     f"({100 * c['value']:.0f}% [{100 * c['lo']:.0f}–{100 * c['hi']:.0f}]) | {r['collision_any']} | "
-                     f"{r['progress_m']:.1f} | {r['interventions']} / {r['frames'] or '–'} | {ratio_cell(r)} |")
-    return "\n".join(lines) + "\n"
+        return (r["family"], r["inner"], r["variant"], r["scenes"],
+                f"{c['k']} ({100 * c['value']:.0f}% [{100 * c['lo']:.0f}–{100 * c['hi']:.0f}])",
+                r["collision_any"], f"{r['progress_m']:.1f}", f"{r['interventions']} / {r['frames'] or '–'}",
+                ratio_cell(r))
+    return markdown_table(COLUMNS, map(cells, rows))
 
 
 def main() -> None:

@@ -30,7 +30,7 @@ import numpy as np
 from adversary.crash.guard_data import read_attack_run
 from adversary.crash.redrive import redrive_attack
 from adversary.crash.scenes import load_record
-from riskmap.evaluation.guard_tables import intervention_totals, print_table, ratio_cell
+from riskmap.evaluation.guard_tables import intervention_totals, markdown_table, print_table, ratio_cell
 from riskmap.infra.atomic import write_json
 from riskmap.registry import cached_planner
 
@@ -147,14 +147,15 @@ def summarise(out: Path) -> list[dict]:
     return rows
 
 
+COLUMNS = ("env", "attack run", "variant", "scenes", "collisions with adversary", "rate", "any collision",
+           "progress (m, 6 s)", "frames", "interventions", "BDI ratio")
+
+
 def markdown(rows: list[dict]) -> str:
-    lines = [("| env | attack run | variant | scenes | collisions with adversary | rate | any collision | "
-              "progress (m, 6 s) | frames | interventions | BDI ratio |"), "|" + "---|" * 11]
-    for r in rows:
-        lines.append(f"| {r['env']} | {r['attack_run']} | {r['variant']} | {r['scenes']} | {r['collisions']} | "
-                     f"{r['collision_rate']:.2f} | {r['collisions_any']} | {r['progress_m']:.1f} | "
-                     f"{r['frames'] or '–'} | {r['interventions'] or 0} | {ratio_cell(r)} |")
-    return "\n".join(lines) + "\n"
+    return markdown_table(COLUMNS, [(r["env"], r["attack_run"], r["variant"], r["scenes"], r["collisions"],
+                                     f"{r['collision_rate']:.2f}", r["collisions_any"], f"{r['progress_m']:.1f}",
+                                     r["frames"] or "–", r["interventions"] or 0, ratio_cell(r))
+                                    for r in rows])
 
 
 def main() -> None:

@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from riskmap.evaluation.guard_tables import intervention_totals, print_table, ratio_cell
+from riskmap.evaluation.guard_tables import intervention_totals, markdown_table, print_table, ratio_cell
 from riskmap.guard.aggressors import AggressorHook
 from riskmap.infra.atomic import write_json
 from riskmap.infra.stats import wilson
@@ -109,23 +109,24 @@ def summarise(out: Path) -> list[dict]:
     return rows
 
 
+COLUMNS = ("env", "scene", "planner", "variant", "episodes", "collisions [95% CI]", "that count [95% CI]",
+           "avoidable / at fault / struck from behind / side / valid attack / unknown", "distance (m)",
+           "mean speed (m/s)", "frames", "interventions (hard)", "BDI ratio")
+
+
 def markdown(rows: list[dict]) -> str:
-    lines = [("| env | scene | planner | variant | episodes | collisions [95% CI] | that count [95% CI] | "
-              "avoidable / at fault / struck from behind / side / valid attack / unknown | distance (m) | "
-             "mean speed (m/s) | frames | interventions (hard) | BDI ratio |"), "|" + "---|" * 13]
-    for r in rows:
+    def cells(r: dict) -> tuple:
         ci = r["collision_ci"]
         f = r.get("failures") or summarise_failures([None] * r["collisions"], r["episodes"])
         fc = f["counted_ci95"]
         classes = (f"{f['avoidable']} / {f['at_fault']} / {f['struck_from_behind']} / {f['side']} / "
                    f"{'–' if f['valid'] is None else f['valid']} / {f['unknown']}")
-        lines.append(f"| {r['env']} | {r['scene']} | {r['inner']} | {r['variant']} | {r['episodes']} | "
-                     f"{r['collisions']} ({100 * ci['value']:.0f}% [{100 * ci['lo']:.0f}–{100 * ci['hi']:.0f}]) | "
-                     f"{f['counted']} ({100 * f['counted_rate']:.0f}% [{100 * fc[0]:.0f}–{100 * fc[1]:.0f}]) | "
-                     f"{classes} | "
-                     f"{r['distance_m']:.0f} | {r['mean_speed_mps']:.1f} | {r['frames'] or '–'} | "
-                     f"{r['interventions'] or 0} ({r['hard']}) | {ratio_cell(r)} |")
-    return "\n".join(lines) + "\n"
+        return (r["env"], r["scene"], r["inner"], r["variant"], r["episodes"],
+                f"{r['collisions']} ({100 * ci['value']:.0f}% [{100 * ci['lo']:.0f}–{100 * ci['hi']:.0f}])",
+                f"{f['counted']} ({100 * f['counted_rate']:.0f}% [{100 * fc[0]:.0f}–{100 * fc[1]:.0f}])",
+                classes, f"{r['distance_m']:.0f}", f"{r['mean_speed_mps']:.1f}", r["frames"] or "–",
+                f"{r['interventions'] or 0} ({r['hard']})", ratio_cell(r))
+    return markdown_table(COLUMNS, map(cells, rows))
 
 
 def main() -> None:

@@ -54,7 +54,7 @@ from adversary.attacks.episode import (
     npz_bytes,
     scene_arrays,
 )
-from adversary.attacks.recorded import job_family, scene_record
+from adversary.attacks.recorded import job_family
 from rasterize.errors import InputError
 from rasterize.timebase import HISTORY_S, PLAN_DT_S
 from riskmap.infra.config_mapping import require
@@ -236,19 +236,14 @@ def rebuild_scene(attack: dict):
     """The `SceneRecord` a job attacked, recorded again from `attack` (its export__attack_json):
     a highway-env scene by driving the human again, a recorded one by cutting it from its
     recording again, exactly as `crash_job` does. InputError if it cannot be."""
-    from adversary.crash.recorded import record_recorded_scene
-    from adversary.crash.scenes import AttackScene, record_attack_scene
+    from adversary.crash.scene_source import scene_source
+    from adversary.crash.scenes import AttackScene
 
     try:
         scene = AttackScene(**attack["scene"])
     except (KeyError, TypeError) as err:
         raise InputError(f"the job's export data names no scene ({err})") from None
-    if scene.recording:
-        if not Path(scene.recording).is_file():
-            raise InputError(f"recording {scene.recording} is not there; put it back (the job's scene was "
-                             "cut from it)")
-        return record_recorded_scene(scene, family=attack.get("family") or None)
-    return record_attack_scene(scene)
+    return scene_source(scene).record(scene, attack.get("family") or None)
 
 
 def _artifact(result: dict, panel: Path, recording: RecordingPlanner | None, record=None) -> bytes | None:
@@ -268,15 +263,15 @@ def _artifact(result: dict, panel: Path, recording: RecordingPlanner | None, rec
 def crash_job(job) -> tuple[dict, bytes | None]:
     """(record fields, artifact) of one campaign job of the crash attack (module docstring)."""
     from adversary.crash.attack import attack_records
-    from adversary.crash.scenes import AttackScene, record_attack_scene
+    from adversary.crash.scene_source import scene_source
+    from adversary.crash.scenes import AttackScene
 
     params: CrashAttackParams = job.attack_params
     recorded = getattr(job, "scene", None)
     scene = (recorded.attack_scene() if recorded is not None
              else AttackScene(job.env_id, job.scene_seed, job.episode, params.t0_s))
     try:
-        # 10 Hz: CRASH's judge drives at its own rates
-        record = scene_record(recorded) if recorded is not None else record_attack_scene(scene)
+        record = scene_source(scene).record(scene, recorded.family if recorded is not None else None)
     except InputError as error:
         return _not_attacked(str(error), {"selector": params.selector}), None
     planner = cached_planner(job.planner, job.planner_seed)

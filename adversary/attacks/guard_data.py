@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from riskmap.infra.cli import QUIET_HELP
+from riskmap.infra.cli import add_run_options
 
 
 def _run_guard_data(args: argparse.Namespace) -> int:
@@ -61,7 +61,5 @@ def add_parsers(subparsers) -> None:
     p.add_argument("--cut", default="contact", choices=("contact", "judge"),
                    help="cut a collision at the onset of the box contact (as highway-env ends natural "
                         "episodes) or at the judged step (IoU > 0.02)")
-    p.add_argument("--resume", action="store_true",
-                   help="continue an interrupted export into --out (windows already written are kept)")
-    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
-    p.set_defaults(func=_run_guard_data)
+    add_run_options(p, _run_guard_data,
+                    resume="continue an interrupted export into --out (windows already written are kept)")

@@ -11,8 +11,8 @@ from adversary.crash.config import TrainSelectorConfig, TrainTrafficConfig
 from rasterize.timebase import REPLAN_HZ
 from riskmap.registry import SPEC_HELP, display_name
 from riskmap.infra.cli import (
-    QUIET_HELP,
     add_config_options,
+    add_run_options,
     config_from_args,
     non_negative_int,
     positive_float,
@@ -61,10 +61,8 @@ def add_parsers(subparsers) -> None:
                                                       "agent; agents off-road in the log left out; 0: off)"},
                        option_types={"epochs": positive_int, "batch_size": positive_int})
     p.add_argument("--threads", type=int, default=0, help="torch CPU threads (0: as many as torch picks)")
-    p.add_argument("--resume", action="store_true",
-                   help="continue an interrupted run in --out from its last finished epoch")
-    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
-    p.set_defaults(func=_run_train_traffic)
+    add_run_options(p, _run_train_traffic,
+                    resume="continue an interrupted run in --out from its last finished epoch")
 
 
 def _run_train_selector(args: argparse.Namespace) -> int:
@@ -81,7 +79,7 @@ def _run_train_selector(args: argparse.Namespace) -> int:
 
 
 def _run_scenes(args: argparse.Namespace) -> int:
-    from adversary.crash.run import record_commonroad_scenes, record_scenes
+    from adversary.crash.scene_sweep import EnvSweep, RecordingSweep, record_scenes
     from rasterize.errors import InputError
 
     if args.commonroad:
@@ -89,8 +87,8 @@ def _run_scenes(args: argparse.Namespace) -> int:
             raise InputError("--seed and --first-episode choose highway-env episodes; drop them with --commonroad")
         if args.static_agents:
             raise InputError("--static-agents adds vehicles to simulated episodes; drop it with --commonroad")
-        index = record_commonroad_scenes(args.commonroad, args.count, Path(args.out), args.t0, args.family,
-                                         resume=args.resume, progress=not args.quiet)
+        index = record_scenes(RecordingSweep(tuple(args.commonroad), args.t0, args.family), args.count,
+                              Path(args.out), resume=args.resume, progress=not args.quiet)
         print(f"{len(index['scenes'])} scenes in {args.out} ({len(index['skipped'])} vehicles skipped, "
               f"{len(index['files_left_out'])} files of the same traffic left out)")
         if len(index["scenes"]) < args.count:
@@ -99,8 +97,8 @@ def _run_scenes(args: argparse.Namespace) -> int:
         return 0
     if args.seed is None or args.family is not None:
         raise InputError("--env needs --seed N (and takes no --family); pass --seed")
-    index = record_scenes(args.env, args.seed, args.count, Path(args.out), args.first_episode, args.t0,
-                          resume=args.resume, progress=not args.quiet, static_agents=args.static_agents)
+    index = record_scenes(EnvSweep(args.env, args.seed, args.first_episode, args.t0, args.static_agents),
+                          args.count, Path(args.out), resume=args.resume, progress=not args.quiet)
     print(f"{len(index['scenes'])} scenes in {args.out} ({len(index['skipped'])} episodes skipped)")
     return 0
 
@@ -169,10 +167,8 @@ def add_attack_parsers(subparsers) -> None:
                                                                      "windows_per_episode", "epochs",
                                                                      "unroll_steps")})
     p.add_argument("--threads", type=int, default=1, help="torch CPU threads (0 counts as 1)")
-    p.add_argument("--resume", action="store_true",
-                   help="continue an interrupted run in --out (labels and finished epochs are kept)")
-    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
-    p.set_defaults(func=_run_train_selector)
+    add_run_options(p, _run_train_selector,
+                    resume="continue an interrupted run in --out (labels and finished epochs are kept)")
 
     p = subparsers.add_parser("scenes", help="record held-out attack scenes from highway-env episodes "
                                              "or CommonRoad recordings")
@@ -194,10 +190,8 @@ def add_attack_parsers(subparsers) -> None:
     p.add_argument("--static-agents", type=non_negative_int, default=0,
                    help="--env: parked/stopped vehicles added to each simulated episode (CRASH's "
                         "Motion-Aware Masking benchmark; 0 to 10)")
-    p.add_argument("--resume", action="store_true",
-                   help="record more scenes into --out (the scenes its index lists are kept)")
-    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
-    p.set_defaults(func=_run_scenes)
+    add_run_options(p, _run_scenes,
+                    resume="record more scenes into --out (the scenes its index lists are kept)")
 
     p = subparsers.add_parser("attack", help="CRASH / distance-based attacks on recorded scenes")
     p.add_argument("--planner", required=True, help="the ego under test, a " + SPEC_HELP)
@@ -233,9 +227,7 @@ def add_attack_parsers(subparsers) -> None:
                    help="generate with CRASH's eq. 8 alone, without the validity terms (the adversary's "
                         "collisions with other agents and its kinematic excess; on by default)")
     p.add_argument("--panels", type=non_negative_int, default=0, help="write PNG panels of the first N scenes")
-    p.add_argument("--resume", action="store_true",
-                   help="continue an interrupted run in --out (the scenes already attacked are kept)")
-    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
-    p.set_defaults(func=_run_attack)
+    add_run_options(p, _run_attack,
+                    resume="continue an interrupted run in --out (the scenes already attacked are kept)")
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from adversary.crash.scenes import WINDOW_DT_S, SceneRecord
+from adversary.crash.scenes import WINDOW_DT_S, AttackScene, SceneRecord, record_attack_scene
 from rasterize.timebase import FUTURE_S, HISTORY_S
 from riskmap.sim.records.failures import HIGHWAY_ENV_LIMITS
 from riskmap.sim.worlds.log_replay import HumanLog
@@ -55,6 +55,10 @@ class HighwayWorld:
 @dataclass(frozen=True)
 class HighwaySource:
     limits = HIGHWAY_ENV_LIMITS
+
+    def record(self, scene: AttackScene, family: str | None = None) -> SceneRecord:
+        # the IDM/MOBIL human driven on the seeded episode, at 10 Hz (CRASH's judge drives at its own rates)
+        return record_attack_scene(scene)
 
     def world(self, record: SceneRecord, log: HumanLog, planner, planner_spec: str, control_hz: int,
               replan_hz: int) -> HighwayWorld:

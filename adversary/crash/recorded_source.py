@@ -12,6 +12,7 @@ The drive's arrays keep the highway source's contract: recorder ids are log agen
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -19,10 +20,11 @@ from adversary.crash.recorded import (
     FINAL_SCENE_AGENTS,
     FINAL_SCENE_RADIUS_M,
     log_traffic,
+    record_recorded_scene,
     recording_traffic,
     road_network,
 )
-from adversary.crash.scenes import HISTORY_S, WINDOW_DT_S, SceneRecord, window_rows
+from adversary.crash.scenes import HISTORY_S, WINDOW_DT_S, AttackScene, SceneRecord, window_rows
 from rasterize.commonroad.config import CommonRoadSceneConfig
 from rasterize.commonroad.lanes import lanes_from_lanelets
 from rasterize.commonroad.tracks import RecordedTraffic
@@ -188,6 +190,12 @@ class RecordedWorld:
 @dataclass(frozen=True)
 class RecordedSource:
     limits = CAR_LIMITS        # recorded cars, not highway-env's kinematic model
+
+    def record(self, scene: AttackScene, family: str | None = None) -> SceneRecord:
+        # cut from the recording again, exactly as the sweep cut it
+        if not Path(scene.recording).is_file():
+            raise InputError(f"recording {scene.recording} is not there; put it back (the scene was cut from it)")
+        return record_recorded_scene(scene, family=family)
 
     def world(self, record: SceneRecord, log: HumanLog, planner, planner_spec: str, control_hz: int,
               replan_hz: int) -> RecordedWorld:

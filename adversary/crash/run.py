@@ -1,11 +1,7 @@
 """`adversary scenes` and `adversary attack`: record held-out attack scenes, attack them all.
 
-Scenes: DIR/scene_NNNN.npz (+ .json) written by `record_scenes`, sweeping episodes 0, 1, ... of
-`--seed` and skipping those that cannot be attacked (the human crashed before t0 + horizon, or
-no vehicle near the ego); DIR/index.json lists them in order. The index is the commit point: a
-scene counts once it is listed there, and `--resume` goes on from what the index says.
-`record_commonroad_scenes` sweeps the vehicles of CommonRoad recordings instead
-(`adversary.crash.recorded`).
+Scenes: DIR/scene_NNNNN.npz (+ .json) and DIR/index.json, written by the one scene writer over
+a sweep of highway-env episodes or of recorded vehicles (`adversary.crash.scene_sweep`).
 
 Attacks: OUT/attacks/<scene>.json, one per scene, written atomically as soon as its batch
 finishes (`--batch-size` scenes are optimised together: one Adam step updates all of them, which
@@ -28,110 +24,13 @@ from pathlib import Path
 import numpy as np
 
 from adversary.crash.attack import AttackConfig, attack_records, load_models
+from adversary.crash.scene_sweep import INDEX
 from rasterize.errors import InputError
-from rasterize.timebase import CONTROL_HZ
 from riskmap.infra.atomic import atomic_write, write_json
 from riskmap.infra.parallel import run_parallel
-from riskmap.infra.provenance import provenance
-from riskmap.infra.rundir import claim_out_dir, lock_out_dir, read_settings, refuse_unless_resume
+from riskmap.infra.rundir import claim_out_dir
 from riskmap.sim.loop.plan_checks import implausible_note, summarise_implausible
 from riskmap.sim.records.record import current_names
-
-INDEX = "index.json"
-
-
-def record_scenes(env_id: str, seed: int, count: int, out: Path, first_episode: int = 0,
-                  t0_s: float = 2.0, resume: bool = False, progress: bool = True,
-                  static_agents: int = 0) -> dict:
-    """`static_agents`: parked / stopped vehicles added to every episode
-    (`riskmap.sim.drivers.static_agents`), kept in each scene and in the index."""
-    from adversary.crash.scenes import AttackScene, record_attack_scene
-
-    out = Path(out)
-    index_path = out / INDEX
-    # Settings no episode can satisfy (an unknown env, too short a history) stop here, before
-    # --out exists: inside the loop they would only skip one episode after another, forever.
-    if seed < 0 or first_episode < 0:
-        raise InputError(f"--seed {seed} and --first-episode {first_episode} must be 0 or more")
-    AttackScene(env_id, seed, first_episode, t0_s, static_agents=static_agents).check(control_hz=CONTROL_HZ)
-    refuse_unless_resume(out, "scenes", None, resume)
-    # The index is the commit point: a scene counts once the index lists it. A run killed before
-    # its first index write left scene files but no index; resuming it starts afresh over them.
-    index = read_settings(index_path) if resume and index_path.exists() else None
-    if index is not None and (index["env_id"], index["seed"], index["t0_s"]) != (env_id, seed, t0_s):
-        raise InputError(f"--out {out} holds scenes of {index['env_id']} seed {index['seed']}; choose another --out")
-    # An index from before static vehicles existed holds scenes without any.
-    if index is not None and index.get("static_agents", 0) != static_agents:
-        raise InputError(f"--out {out} holds scenes with --static-agents {index.get('static_agents', 0)}, "
-                         f"not {static_agents}; resume with the same --static-agents or choose another --out")
-    lock_out_dir(out)   # one writer (creates it); removes the temporary files a killed writer left
-    if index is None:
-        index = {"env_id": env_id, "seed": seed, "t0_s": t0_s, "static_agents": static_agents,
-                 "scenes": [], "skipped": [], "next_episode": first_episode, **provenance()}
-    while len(index["scenes"]) < count:
-        episode = index["next_episode"]
-        name = f"scene_{episode:05d}"
-        try:
-            record = record_attack_scene(AttackScene(env_id, seed, episode, t0_s, static_agents=static_agents))
-        except InputError as error:
-            index["skipped"].append({"episode": episode, "why": str(error)})
-        else:
-            _add_scene(index, out, name, record, count, progress, f"episode {episode}")
-        index["next_episode"] = episode + 1
-        write_json(index_path, index)
-    return index
-
-
-def _add_scene(index: dict, out: Path, name: str, record, count: int, progress: bool, where: str) -> None:
-    """Write scene `name` and list it in the index (which the caller then commits)."""
-    from adversary.crash.scenes import save_record
-
-    save_record(record, out / f"{name}.npz")
-    index["scenes"].append(name)
-    if progress and len(index["scenes"]) % 10 == 0:
-        print(f"{len(index['scenes'])}/{count} scenes ({where})", flush=True)
-
-
-def record_commonroad_scenes(inputs: list[str | Path], count: int, out: Path, t0_s: float = 2.0,
-                             family: str | None = None, resume: bool = False, progress: bool = True) -> dict:
-    """`adversary scenes --commonroad`: recorded vehicles of CommonRoad files as attack scenes
-    (`adversary.crash.recorded`). Files in natural order, one per moment of traffic
-    (`sweep_files`); egos by obstacle id; each attacked `t0_s` after its first recorded time.
-    Scene `episode` is the ego's place in that order (scene_seed 0), so no two scenes of a
-    sweep share (scene_seed, episode); a vehicle that cannot be attacked is listed in the index's
-    "skipped" with why. The index is the commit point, as for `record_scenes`."""
-    from adversary.crash.recorded import SMOOTHING_S, candidates, sweep_files, sweep_scenes
-    from adversary.crash.scenes import RECORDED_ENV, AttackScene
-    from riskmap.data.collect_commonroad import scenario_files
-
-    out = Path(out)
-    index_path = out / INDEX
-    AttackScene(RECORDED_ENV, 0, 0, t0_s, recording="check", ego_id=0).check(control_hz=CONTROL_HZ)
-    refuse_unless_resume(out, "scenes", None, resume)
-    files, family, dropped = sweep_files(scenario_files(inputs, flag="--commonroad"), family)
-    settings = {"env_id": RECORDED_ENV, "family": family, "t0_s": t0_s, "smoothing_s": SMOOTHING_S,
-                "commonroad": [str(p) for p in files], "files_left_out": dropped}
-    index = read_settings(index_path) if resume and index_path.exists() else None
-    if index is not None and {k: index.get(k) for k in settings} != settings:
-        raise InputError(f"--out {out} holds scenes of other recordings or settings; choose another --out")
-    lock_out_dir(out)
-    if index is None:
-        index = {**settings, "seed": 0, "scenes": [], "skipped": [], "next_candidate": 0, **provenance()}
-    todo = candidates(files, t0_s)
-    index["candidates"] = len(todo)
-    # The sweep tries a candidate only when it is asked for the next one: stop asking at `count`.
-    sweep = sweep_scenes(files, family, t0_s, index["next_candidate"], todo)
-    for episode, path, ego_id, _, record, why in (sweep if len(index["scenes"]) < count else ()):
-        if why:
-            index["skipped"].append({"file": path.name, "ego_id": ego_id, "why": why})
-        else:
-            _add_scene(index, out, f"scene_{episode:05d}", record, count, progress, f"{path.name} vehicle {ego_id}")
-        index["next_candidate"] = episode + 1
-        write_json(index_path, index)
-        if len(index["scenes"]) >= count:
-            break
-    write_json(index_path, index)
-    return index
 
 
 def scenes_family(scenes_dir: Path) -> str:

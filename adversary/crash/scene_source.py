@@ -51,6 +51,11 @@ class SceneWorld(Protocol):
 class SceneSource(Protocol):
     limits: object         # riskmap.sim.records.failures limits the failure classifier holds the ego to
 
+    def record(self, scene: AttackScene, family: str | None = None) -> SceneRecord:
+        """Record `scene` (the human's drive up to and past t0, the others around it); InputError
+        when it cannot be attacked. `family`: a recording's traffic-model family (default: from
+        its file name); highway-env scenes have their env's."""
+
     def world(self, record: SceneRecord, log: HumanLog, planner, planner_spec: str, control_hz: int,
               replan_hz: int) -> SceneWorld:
         """The world in which `planner` drives against `log` (the scene's spliced log)."""

@@ -114,15 +114,11 @@ def export_campaign(campaign_dir: Path, out: Path, fmt: str = "commonroad", only
     exported and what was skipped with why (module docstring). InputError when a named job is not
     the campaign's or when no job can be exported."""
     from adversary.attacks.crash import rebuild_scene, scene_digest
-    from adversary.export.commonroad import FORMATS, add_exported, write_commonroad
+    from adversary.export.commonroad import add_exported, export_target, write_commonroad
     from riskmap.infra.atomic import write_json
     from riskmap.infra.rundir import claim_out_dir
 
-    if fmt not in FORMATS:
-        raise InputError(f"--format {fmt!r} is unknown; use one of {', '.join(FORMATS)}")
-    campaign_dir, out = Path(campaign_dir), Path(out)
-    if out.is_file():
-        raise InputError(f"--out {out} is a file; pass a folder for the exported scenes")
+    campaign_dir, out = Path(campaign_dir), export_target(fmt, out)
     records = _read_campaign(campaign_dir)
     if jobs:
         known = {r["job_id"] for r in records}

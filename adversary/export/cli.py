@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from riskmap.infra.cli import QUIET_HELP
+from riskmap.infra.cli import add_run_options
 
 
 def _run_export(args: argparse.Namespace) -> int:
@@ -22,8 +22,7 @@ def _run_export(args: argparse.Namespace) -> int:
         index = export_campaign(Path(args.run), Path(args.out), args.format, only_failures=args.only_failures,
                                 resume=args.resume, jobs=tuple(args.job or ()), plot=args.plot,
                                 progress=not args.quiet)
-        print(f"{len(index['exported'])} jobs exported to {args.out} ({len(index['skipped'])} skipped; "
-              f"see {Path(args.out) / 'index.json'})")
+        _print_exported(index, "jobs", args.out)
         return 0
     if args.job:
         raise InputError(f"--job is for campaign directories; --run {args.run} is not one (no campaign.json "
@@ -31,9 +30,15 @@ def _run_export(args: argparse.Namespace) -> int:
     index = export_run(Path(args.run), Path(args.out), args.format, only_failures=args.only_failures,
                        resume=args.resume, scenes=Path(args.scenes) if args.scenes else None,
                        names=tuple(args.scene or ()), plot=args.plot, progress=not args.quiet)
-    print(f"{len(index['exported'])} scenes exported to {args.out} ({len(index['skipped'])} skipped; "
-          f"see {Path(args.out) / 'index.json'})")
+    _print_exported(index, "scenes", args.out)
     return 0
+
+
+def _print_exported(index: dict, what: str, out: str) -> None:
+    """An export's one summary line: how many `what` (jobs, scenes) it wrote and skipped, and where
+    its index says which and why."""
+    print(f"{len(index['exported'])} {what} exported to {out} ({len(index['skipped'])} skipped; "
+          f"see {Path(out) / 'index.json'})")
 
 
 def add_parsers(subparsers) -> None:
@@ -58,6 +63,4 @@ def add_parsers(subparsers) -> None:
     p.add_argument("--plot", action="store_true",
                    help="also draw each scene with commonroad-io's renderer at the collision step "
                         "(<scene>.png)")
-    p.add_argument("--resume", action="store_true", help="continue an export into the same --out")
-    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
-    p.set_defaults(func=_run_export)
+    add_run_options(p, _run_export, resume="continue an export into the same --out")

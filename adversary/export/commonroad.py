@@ -599,6 +599,17 @@ def render_png(xml: Path, png: Path, time_step: int | None = None, radius_m: flo
 
 # ---- a whole run ---------------------------------------------------------------------------------
 
+def export_target(fmt: str, out: Path) -> Path:
+    """What every `adversary export` checks before reading anything: `fmt` is a known format and
+    `out` is not a file (InputError naming the fix otherwise). Returns `out` as a Path."""
+    if fmt not in FORMATS:
+        raise InputError(f"--format {fmt!r} is unknown; use one of {', '.join(FORMATS)}")
+    out = Path(out)
+    if out.is_file():
+        raise InputError(f"--out {out} is a file; pass a folder for the exported scenes")
+    return out
+
+
 def read_attack_run(run_dir: Path) -> dict:
     """run.json of an `adversary attack` run folder (InputError naming the fix otherwise)."""
     run_dir = Path(run_dir)
@@ -640,11 +651,7 @@ def export_run(run_dir: Path, out: Path, fmt: str = "commonroad", only_failures:
     from riskmap.infra.atomic import write_json
     from riskmap.infra.rundir import claim_out_dir
 
-    if fmt not in FORMATS:
-        raise InputError(f"--format {fmt!r} is unknown; use one of {', '.join(FORMATS)}")
-    run_dir, out = Path(run_dir), Path(out)
-    if out.is_file():
-        raise InputError(f"--out {out} is a file; pass a folder for the exported scenes")
+    run_dir, out = Path(run_dir), export_target(fmt, out)
     meta = read_attack_run(run_dir)
     scenes_dir = scenes_of(run_dir, meta, scenes)
     records = sorted((run_dir / "attacks").glob("*.json"))

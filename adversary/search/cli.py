@@ -7,7 +7,7 @@ import json
 from pathlib import Path
 
 from rasterize.errors import InputError
-from riskmap.infra.cli import QUIET_HELP, add_config_options, config_from_args, positive_int
+from riskmap.infra.cli import add_config_options, add_run_options, config_from_args, positive_int
 from riskmap.registry import SPEC_HELP
 
 
@@ -69,9 +69,7 @@ def add_parsers(subparsers) -> None:
                    help="local process pool, or Ray tasks (pip install 'riskmap-toolkit[ray]')")
     p.add_argument("--address", default=None, help="Ray cluster address (default: a local Ray)")
     p.add_argument("--out", required=True, help="directory for evaluations, summary and figures")
-    p.add_argument("--resume", action="store_true", help="continue a run in --out")
-    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
-    p.set_defaults(func=_run_search)
+    add_run_options(p, _run_search, resume="continue a run in --out")
     p = subparsers.add_parser("search-report", help="rebuild the summary and figures of a search run")
     p.add_argument("--out", required=True, help="directory of a search run")
     p.add_argument("--no-frames", action="store_true", help="skip replaying the best failure")

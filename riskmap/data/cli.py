@@ -6,7 +6,7 @@ import argparse
 from pathlib import Path
 
 from rasterize.errors import InputError
-from riskmap.infra.cli import positive_int
+from riskmap.infra.cli import add_run_options, positive_int
 
 
 def _cmd_collect(args: argparse.Namespace) -> int:
@@ -56,6 +56,4 @@ def add_parsers(sub) -> None:
                         "--from-commonroad only recorded in the manifest")
     p.add_argument("--out", required=True, help="dataset directory to create")
     p.add_argument("--workers", type=positive_int, default=1, help="processes (default 1)")
-    p.add_argument("--resume", action="store_true", help="continue an interrupted collection")
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
-    p.set_defaults(func=_cmd_collect)
+    add_run_options(p, _cmd_collect, resume="continue an interrupted collection", quiet="no progress bar")

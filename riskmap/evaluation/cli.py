@@ -8,7 +8,7 @@ from pathlib import Path
 
 from rasterize.errors import InputError
 from rasterize.timebase import REPLAN_HZ
-from riskmap.infra.cli import QUIET_HELP, comma_list, positive_float, positive_int
+from riskmap.infra.cli import add_run_options, comma_list, positive_float, positive_int
 from riskmap.registry import SPEC_HELP
 
 
@@ -130,10 +130,8 @@ def add_parsers(sub) -> None:
     p.add_argument("--goal-variance", type=positive_float, default=None,
                    help="cells²; planning-time goal variance of a risk-map planner (default: the "
                         "checkpoint's)")
-    p.add_argument("--resume", action="store_true",
-                   help="continue an interrupted drive in --out (finished episodes are kept)")
-    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
-    p.set_defaults(func=_cmd_drive)
+    add_run_options(p, _cmd_drive,
+                    resume="continue an interrupted drive in --out (finished episodes are kept)")
 
     p = sub.add_parser("check-planner", help="drive a planner on a few scenes of each family and "
                        "say, one line each, where it breaks the planner contract")
@@ -151,8 +149,7 @@ def add_parsers(sub) -> None:
                    help="seconds driven per highway-env episode")
     p.add_argument("--seed", type=int, default=0,
                    help="seed of the planner and of the highway-env episodes (as drive --seed)")
-    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
-    p.set_defaults(func=_cmd_check_planner)
+    add_run_options(p, _cmd_check_planner)
 
     p = sub.add_parser("evaluate", help="closed-loop benchmark of planners (Table I metrics)")
     p.add_argument("--planners", required=True, help="comma-separated; each a " + SPEC_HELP)
@@ -184,11 +181,9 @@ def add_parsers(sub) -> None:
                    help="run directory (OUT/table.md, OUT/results.json, OUT/episodes.csv, per-episode "
                         "records)")
     p.add_argument("--workers", type=positive_int, default=1, help="processes (default 1)")
-    p.add_argument("--resume", action="store_true",
-                   help="continue an interrupted evaluation in --out (finished episodes are kept; it "
-                        "may name more planners)")
-    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
-    p.set_defaults(func=_cmd_evaluate)
+    add_run_options(p, _cmd_evaluate,
+                    resume="continue an interrupted evaluation in --out (finished episodes are kept; it "
+                           "may name more planners)")
 
     p = sub.add_parser("tune-goal-variance", help="choose a risk-map checkpoint's planning-time goal "
                                                    "variance on held-out windows (lowest ADE)")

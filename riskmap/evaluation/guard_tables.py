@@ -1,5 +1,5 @@
 """The guard's result tables, in one form: decision frames and interventions summed over driven
-records, the BDI intervention ratio as a table cell, and a table printed and optionally written
+records, the BDI intervention ratio as a table cell, a markdown table of cells, and a table printed and optionally written
 as PREFIX.json (the rows) and PREFIX.md (the markdown). Records are dicts with an optional
 "guard" entry holding the guard's summary (`frames`, `interventions`), as the guard's closed-loop
 drives and the re-drives of attack records (`adversary.crash.redrive`) write them."""
@@ -23,6 +23,14 @@ def intervention_totals(records: list[dict]) -> dict:
 def ratio_cell(row: dict) -> str:
     """A row's BDI intervention ratio as a table cell ("–" where it has none)."""
     return f"{row['intervention_ratio']:.3f}" if row["intervention_ratio"] is not None else "–"
+
+
+def markdown_table(columns, rows) -> str:
+    """A markdown table: the header of `columns`, its rule, then one line per row of `rows` (each a
+    sequence of cells, written as `str` writes them), newline-terminated."""
+    lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+    lines += ["| " + " | ".join(str(cell) for cell in row) + " |" for row in rows]
+    return "\n".join(lines) + "\n"
 
 
 def print_table(rows: list[dict], markdown, prefix: Path | None) -> None:

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from riskmap.infra.cli import comma_list, positive_float, positive_int
+from riskmap.infra.cli import add_command_group, comma_list, positive_float, positive_int
 
 
 def _cmd_figures_scenes(args: argparse.Namespace) -> int:
@@ -26,8 +26,7 @@ def _cmd_figures_plans(args: argparse.Namespace) -> int:
 
 
 def add_parsers(sub) -> None:
-    p = sub.add_parser("figures", help="export PNG figures")
-    fig_sub = p.add_subparsers(dest="figure", required=True)
+    fig_sub = add_command_group(sub, "figures", help="export PNG figures", dest="figure")
     q = fig_sub.add_parser("scenes", help="BEV rasters with the future path overlaid")
     q.add_argument("--data", required=True, help="dataset directory (from riskmap collect)")
     q.add_argument("--out", required=True, help="directory for the PNGs")

@@ -7,7 +7,13 @@ from pathlib import Path
 
 from riskmap.guard.config import GuardTrainConfig, TGATConfig
 from riskmap.guard.dataset import GuardCollectConfig
-from riskmap.infra.cli import QUIET_HELP, add_config_options, config_from_args, positive_int
+from riskmap.infra.cli import (
+    add_command_group,
+    add_config_options,
+    add_run_options,
+    config_from_args,
+    positive_int,
+)
 
 
 def cmd_collect(args: argparse.Namespace) -> int:
@@ -53,8 +59,8 @@ def cmd_evaluate(args: argparse.Namespace) -> int:
 
 def add_parsers(sub) -> None:
     """The `guard` command group under the top-level `riskmap` parser."""
-    p = sub.add_parser("guard", help="the neuro-symbolic guard: accident data, TGAT training")
-    guard_sub = p.add_subparsers(dest="guard_command", required=True)
+    guard_sub = add_command_group(sub, "guard", help="the neuro-symbolic guard: accident data, TGAT training",
+                                  dest="guard_command")
     q = guard_sub.add_parser("collect", help="(ego, neighbour) accident windows from closed-loop episodes")
     q.add_argument("--out", required=True, help="dataset directory to create")
     add_config_options(
@@ -72,10 +78,8 @@ def add_parsers(sub) -> None:
                       "the held-out families SEED + 2"},
         option_types={name: positive_int for name in ("train_episodes", "seen_test_episodes",
                                                       "unseen_episodes", "planner_every")})
-    q.add_argument("--resume", action="store_true",
-                   help="continue an interrupted collection in --out (finished jobs are kept)")
-    q.add_argument("--quiet", action="store_true", help=QUIET_HELP)
-    q.set_defaults(func=cmd_collect)
+    add_run_options(q, cmd_collect,
+                    resume="continue an interrupted collection in --out (finished jobs are kept)")
     q = guard_sub.add_parser("train", help="train the TGAT accident predictor")
     q.add_argument("--data", required=True, help="directory from `riskmap guard collect`")
     q.add_argument("--out", required=True, help="run directory")
@@ -95,10 +99,7 @@ def add_parsers(sub) -> None:
     add_config_options(q, TGATConfig, "horizon_s",
                        help={"horizon_s": "label horizon: a window is positive when the ego touches the "
                                           "neighbour within this many seconds of its last event (≤ 3)"})
-    q.add_argument("--resume", action="store_true",
-                   help="continue an interrupted run in --out from its last finished epoch")
-    q.add_argument("--quiet", action="store_true", help=QUIET_HELP)
-    q.set_defaults(func=cmd_train)
+    add_run_options(q, cmd_train, resume="continue an interrupted run in --out from its last finished epoch")
     q = guard_sub.add_parser("evaluate", help="score a TGAT checkpoint on splits of a guard dataset")
     q.add_argument("--checkpoint", default="checkpoints/guard_tgat", help="checkpoint path without suffix")
     q.add_argument("--data", required=True, help="guard dataset directory")

@@ -1,7 +1,8 @@
 """What every command line of the toolkit shares: the top-level parser (`command_parser`: `--help`
 showing each option's default, `--version`), argument types, options made from the config
-dataclasses (`add_config_options` / `config_from_args`: the dataclass holds each default once), and
-the one way `main` reports errors (one line, exit 2, for bad input; 130 on Ctrl-C, work kept)."""
+dataclasses (`add_config_options` / `config_from_args`: the dataclass holds each default once), the
+options every working command ends with (`add_run_options`: `--resume`, `--quiet`, the handler),
+and the one way `main` reports errors (one line, exit 2, for bad input; 130 on Ctrl-C, work kept)."""
 
 from __future__ import annotations
 
@@ -17,6 +18,9 @@ from rasterize.errors import InputError
 
 DISTRIBUTION = "riskmap-toolkit"     # the installed distribution (pyproject.toml's project.name)
 QUIET_HELP = "no progress bar or progress lines"
+# Where a parsed command line holds its command's words, outermost first: the top-level command,
+# then the subcommand of a command group (`add_command_group`); error lines name the command by them.
+COMMAND_DESTS = ("command", "guard_command", "figure")
 
 
 class DefaultsHelpFormatter(argparse.HelpFormatter):
@@ -66,6 +70,27 @@ def command_parser(prog: str, doc: str) -> CommandParser:
     return parser
 
 
+def add_command_group(subparsers, name: str, help: str, dest: str):
+    """A command group (`riskmap guard`, `riskmap figures`): its parser under `subparsers`, and the
+    subparsers of its required subcommand, whose choice lands in `dest` (one of `COMMAND_DESTS`, so
+    that an error line names the whole command)."""
+    if dest not in COMMAND_DESTS:
+        raise ValueError(f"{dest!r} is not in COMMAND_DESTS: errors of `{name}` would not name its "
+                         "subcommand")
+    return subparsers.add_parser(name, help=help).add_subparsers(dest=dest, required=True)
+
+
+def add_run_options(parser: argparse.ArgumentParser, func, *, resume: str | None = None,
+                    quiet: str = QUIET_HELP) -> None:
+    """The tail every working command's parser ends with: `--resume` (when `resume`, its help text:
+    what continuing keeps, is given), `--quiet` (help `quiet`) and `func`, the handler
+    `run_command` calls."""
+    if resume is not None:
+        parser.add_argument("--resume", action="store_true", help=resume)
+    parser.add_argument("--quiet", action="store_true", help=quiet)
+    parser.set_defaults(func=func)
+
+
 def _number(text: str, kind: type, ok, must: str):
     """`text` as `kind` if `ok(value)`, else an argparse error saying what it `must` be."""
     try:
@@ -95,7 +120,7 @@ def positive_float(text: str) -> float:
 
 def _command_name(args: argparse.Namespace) -> str:
     """The command as typed: `collect`, `guard train`, `figures plans`."""
-    words = (getattr(args, name, None) for name in ("command", "guard_command", "figure"))
+    words = (getattr(args, name, None) for name in COMMAND_DESTS)
     return " ".join(w for w in words if isinstance(w, str) and w)
 
 

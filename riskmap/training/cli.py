@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from riskmap.infra.cli import QUIET_HELP, add_config_options, config_from_args, positive_int
+from riskmap.infra.cli import add_config_options, add_run_options, config_from_args, positive_int
 from riskmap.training.config import PLANNERS, BaselineTrainConfig, TrainConfig
 
 
@@ -86,9 +86,7 @@ def add_parsers(sub) -> None:
                        "max_windows", "predict_s", "raster_px", "risk_goal_threshold", "timing_head",
                        "freeze_risk", "planner", "steps", "max_forward", "max_across", "workers", "cache", help=HELP,
                        option_types=POSITIVE, choices={"planner": PLANNERS})
-    p.add_argument("--resume", action="store_true", help="continue an interrupted run exactly")
-    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
-    p.set_defaults(func=_cmd_train)
+    add_run_options(p, _cmd_train, resume="continue an interrupted run exactly")
 
     p = sub.add_parser("train-baseline", help="train a behaviour-cloning baseline (cnn, cnn_lstm, rvsg)")
     p.add_argument("kind", choices=("cnn", "cnn_lstm", "cnn-lstm", "rvsg"),
@@ -96,6 +94,4 @@ def add_parsers(sub) -> None:
     add_config_options(p, BaselineTrainConfig, "data", "out", "epochs", "batch_size", "lr",
                        "history_frames", "val_groups", "seed", "max_windows", "predict_s",
                        help=HELP, option_types=POSITIVE)
-    p.add_argument("--resume", action="store_true", help="continue an interrupted run exactly")
-    p.add_argument("--quiet", action="store_true", help=QUIET_HELP)
-    p.set_defaults(func=_cmd_train_baseline)
+    add_run_options(p, _cmd_train_baseline, resume="continue an interrupted run exactly")

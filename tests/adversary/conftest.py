@@ -4,6 +4,7 @@ import pytest
 
 from adversary.campaign.config import campaign_from_dict
 from adversary.campaign.run import RunOptions, run_campaign
+from adversary.cli import main
 
 TINY = {
     "name": "tiny", "seed": 0, "planners": ["cv", "idm"],
@@ -27,3 +28,11 @@ def tiny_campaign(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("campaign") / "full"
     run_campaign(tiny_config(), out, RunOptions(progress=False))
     return out
+
+
+def exit_code(argv: list[str]) -> int:
+    """`adversary ARGV`'s exit status, argparse's usage errors (its SystemExit) included."""
+    try:
+        return main(argv)
+    except SystemExit as stop:
+        return stop.code

@@ -430,10 +430,10 @@ class Fixtures:
     @cached_property
     def scenes(self) -> Path:
         """One held-out highway attack scene (`adversary scenes`)."""
-        from adversary.crash.run import record_scenes
+        from adversary.crash.scene_sweep import EnvSweep, record_scenes
 
         out = self.root / "scenes"
-        record_scenes("highway-v0", 0, 1, out, progress=False)
+        record_scenes(EnvSweep("highway-v0", 0), 1, out, progress=False)
         return out
 
     def scenes_variant(self, variant: str) -> Path:
@@ -611,6 +611,33 @@ def add(*rows):
     ROWS.extend(rows)
 
 
+def data_rows(prefix, command, fast):
+    """The row maker of a command that reads one --data folder: `row(id, data, names, *extra,
+    out_arg=OUT, **kw)` is row `prefix/id`, running COMMAND --data DATA FAST... EXTRA... --out OUT_ARG."""
+    def row(id, data, names, *extra, out_arg=OUT, **kw):
+        return R(f"{prefix}/{id}", _argv(*command, "--data", data, *fast, *extra, "--out", out_arg),
+                 names, **kw)
+    return row
+
+
+# (id, --data, names): the damaged `riskmap collect` datasets every command that trains on one refuses
+# before --out exists, naming the file.
+DAMAGED_DATA = (
+    ("data-missing", missing("nodata"), S(missing("nodata"))),
+    ("manifest-truncated", ds("half_manifest"), S("manifest.json")),
+    ("shard-truncated", ds("half_shard"), S("episode_000000.npz")),
+    ("scene-nan", ds("nan_scene"), S("episode_000000.npz")),
+)
+
+
+def damaged_checkpoints(source, other=GUARD_SRC):
+    """(what, checkpoint): the checkpoints in place of one of `source` that a command loading it
+    refuses, naming it: one of another kind (`other`'s), one without a kind, truncated weights,
+    NaN weights."""
+    return (("guard-kind", ck(other)), ("no-kind", ck(source, "no_kind")),
+            ("truncated", ck(source, "half_weights")), ("nan-weights", ck(source, "nan_weights")))
+
+
 # riskmap collect ---------------------------------------------------------------------------------
 C_SIM = ("--episodes", "1", "--quiet")
 add(
@@ -652,28 +679,21 @@ add(
 
 # riskmap train ------------------------------------------------------------------------------------
 T_FAST = ("--resolution", "25", "--epochs", "1", "--batch-size", "2", "--max-windows", "2", "--quiet")
-
-
-def train_row(id, data, names, *extra, **kw):
-    return R(f"train/{id}", _argv(*TRAIN, "--data", data, *T_FAST, *extra, "--out", kw.pop("out_arg", OUT)),
-             names, **kw)
+train_row = data_rows("train", TRAIN, T_FAST)
 
 
 add(
-    train_row("data-missing", missing("nodata"), S(missing("nodata"))),
+    *(train_row(*case) for case in DAMAGED_DATA),
     train_row("data-empty-dir", lambda fx, t: fx.dir("empty_dir"), S(lambda fx, t: fx.dir("empty_dir"))),
     train_row("data-passwd", PASSWD, S(PASSWD)),
     train_row("data-png", PNG, S(PNG)),
     train_row("data-is-guard-dataset", lambda fx, t: fx.guard_data(), S(lambda fx, t: fx.guard_data())),
-    train_row("manifest-truncated", ds("half_manifest"), S("manifest.json")),
     train_row("manifest-empty", ds("empty_manifest"), S("manifest.json")),
     train_row("manifest-passwd", ds("passwd_manifest"), S("manifest.json")),
     train_row("format-version", ds("old_version"), S(ds("old_version"))),
     train_row("index-missing", ds("no_index"), S("index.json")),
-    train_row("shard-truncated", ds("half_shard"), S("episode_000000.npz")),
     train_row("shard-empty", ds("empty_shard"), S("episode_000000.npz")),
     train_row("shard-png", ds("png_shard"), S("episode_000000.npz")),
-    train_row("scene-nan", ds("nan_scene"), S("episode_000000.npz")),
     train_row("scene-inf", ds("inf_scene"), S("episode_000000.npz")),
     train_row("map-nan", ds("nan_map"), S("episode_000000.npz")),
     train_row("resolution-zero", ds(), S("--resolution"), "--resolution", "0", usage=True),
@@ -711,18 +731,11 @@ add(
 
 # riskmap train-baseline --------------------------------------------------------------------------
 B_FAST = ("--epochs", "1", "--batch-size", "2", "--max-windows", "2", "--quiet")
-
-
-def baseline_row(id, data, names, *extra, **kw):
-    return R(f"train-baseline/{id}", _argv(*BASELINE, "--data", data, *B_FAST, *extra, "--out",
-                                           kw.pop("out_arg", OUT)), names, **kw)
+baseline_row = data_rows("train-baseline", BASELINE, B_FAST)
 
 
 add(
-    baseline_row("data-missing", missing("nodata"), S(missing("nodata"))),
-    baseline_row("manifest-truncated", ds("half_manifest"), S("manifest.json")),
-    baseline_row("shard-truncated", ds("half_shard"), S("episode_000000.npz")),
-    baseline_row("scene-nan", ds("nan_scene"), S("episode_000000.npz")),
+    *(baseline_row(*case) for case in DAMAGED_DATA),
     baseline_row("history-frames-zero", ds(), S("--history-frames"), "--history-frames", "0", usage=True),
     baseline_row("lr-negative", ds(), S("--lr"), "--lr", "-1"),
     baseline_row("predict-s-negative", ds(), S("--predict-s"), "--predict-s", "-2"),
@@ -898,10 +911,8 @@ def tune_row(id, checkpoint, data, names, *extra, **kw):
 
 
 add(
-    tune_row("ck-guard-kind", ck(GUARD_SRC), ds(), S(ck(GUARD_SRC))),
-    tune_row("ck-no-kind", ck(RM_SRC, "no_kind"), ds(), S(ck(RM_SRC, "no_kind"))),
-    tune_row("ck-truncated", ck(RM_SRC, "half_weights"), ds(), S(ck(RM_SRC, "half_weights"))),
-    tune_row("ck-nan-weights", ck(RM_SRC, "nan_weights"), ds(), S(ck(RM_SRC, "nan_weights"))),
+    *(tune_row(f"ck-{what}", checkpoint, ds(), S(checkpoint))
+      for what, checkpoint in damaged_checkpoints(RM_SRC)),
     tune_row("data-missing", ck(RM_SRC), missing("nodata"), S(missing("nodata"))),
     tune_row("data-scene-nan", ck(RM_SRC), ds("nan_scene"), S("episode_000000.npz")),
     tune_row("candidates-text", ck(RM_SRC), ds(), S("--candidates"), "--candidates", "five,two"),
@@ -971,9 +982,7 @@ add(
 )
 
 
-def gtrain_row(id, data, names, *extra, **kw):
-    return R(f"guard-train/{id}", _argv(*G_TRAIN, "--data", data, "--epochs", "1", "--quiet", *extra,
-                                        "--out", kw.pop("out_arg", OUT)), names, **kw)
+gtrain_row = data_rows("guard-train", G_TRAIN, ("--epochs", "1", "--quiet"))
 
 
 add(
@@ -1130,11 +1139,9 @@ def selector_row(id, traffic, data, names, *extra, **kw):
 
 add(
     selector_row("traffic-missing", missing("notraffic"), ds(), S(missing("notraffic"))),
-    selector_row("traffic-guard-kind", ck(GUARD_SRC), ds(), S(ck(GUARD_SRC))),
+    *(selector_row(f"traffic-{what}", traffic, ds(), S(traffic))
+      for what, traffic in damaged_checkpoints(TRAFFIC_SRC)),
     selector_row("traffic-bc-kind", ck(BC_SRC), ds(), S(ck(BC_SRC))),
-    selector_row("traffic-no-kind", ck(TRAFFIC_SRC, "no_kind"), ds(), S(ck(TRAFFIC_SRC, "no_kind"))),
-    selector_row("traffic-truncated", ck(TRAFFIC_SRC, "half_weights"), ds(), S(ck(TRAFFIC_SRC, "half_weights"))),
-    selector_row("traffic-nan-weights", ck(TRAFFIC_SRC, "nan_weights"), ds(), S(ck(TRAFFIC_SRC, "nan_weights"))),
     selector_row("data-missing", ck(TRAFFIC_SRC), missing("nodata"), S(missing("nodata"))),
     selector_row("data-scene-nan", ck(TRAFFIC_SRC), ds("nan_scene"), S("episode_000000.npz")),
     selector_row("data-manifest-truncated", ck(TRAFFIC_SRC), ds("half_manifest"), S("manifest.json")),
@@ -1143,19 +1150,12 @@ add(
 )
 
 TR_FAST = ("--epochs", "1", "--quiet")
-
-
-def traffic_row(id, data, names, *extra, **kw):
-    return R(f"train-traffic/{id}", _argv(*TRAFFIC, "--data", data, *TR_FAST, *extra, "--out",
-                                          kw.pop("out_arg", OUT)), names, **kw)
+traffic_row = data_rows("train-traffic", TRAFFIC, TR_FAST)
 
 
 add(
-    traffic_row("data-missing", missing("nodata"), S(missing("nodata"))),
+    *(traffic_row(*case) for case in DAMAGED_DATA),
     traffic_row("data-png", PNG, S(PNG)),
-    traffic_row("manifest-truncated", ds("half_manifest"), S("manifest.json")),
-    traffic_row("shard-truncated", ds("half_shard"), S("episode_000000.npz")),
-    traffic_row("scene-nan", ds("nan_scene"), S("episode_000000.npz")),
     traffic_row("map-nan", ds("nan_map"), S("episode_000000.npz")),
     traffic_row("epochs-zero", ds(), S("--epochs"), "--epochs", "0", usage=True),
     traffic_row("lr-negative", ds(), S("--lr"), "--lr", "-1"),

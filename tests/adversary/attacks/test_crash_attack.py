@@ -134,12 +134,12 @@ def test_a_crash_job_reruns_to_the_same_record(crash_campaign, selector_dir):
 
 def test_a_scene_that_cannot_be_attacked_is_an_ok_record_counted_in_the_ablation(
         crash_campaign, selector_dir, monkeypatch, tmp_path):
-    from adversary.crash import scenes
+    from adversary.crash.highway_source import HighwaySource
 
     def human_crashed(*args, **kwargs):
         raise InputError("highway-v0 seed 0 episode 0: the human crashed at 3.1 s, before t0 + horizon")
 
-    monkeypatch.setattr(scenes, "record_attack_scene", human_crashed)
+    monkeypatch.setattr(HighwaySource, "record", human_crashed)
     [job] = [j for j in campaign_from_dict(_config(selector_dir)).jobs() if j.attack == "DS"]
     record = run_job(job)["record"]
     assert record["status"] == "ok" and record["attacked"] is False and record["collided"] is False

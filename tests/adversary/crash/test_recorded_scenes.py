@@ -12,10 +12,12 @@ from adversary.crash.attack import AttackConfig
 from adversary.crash.cli import default_models
 from adversary.crash.judge import braking_track, ego_track_2hz, judge, rollout
 from adversary.crash.recorded import record_recorded_scene, recording_family, recording_traffic
-from adversary.crash.run import record_commonroad_scenes, run_attacks
+from adversary.crash.run import run_attacks
+from adversary.crash.scene_sweep import RecordingSweep, record_scenes
 from adversary.crash.scenes import RECORDED_ENV, AttackScene, load_record, save_record
 from rasterize.errors import InputError
 from riskmap.registry import cached_planner
+from tests.adversary.conftest import exit_code
 
 FIXTURES = Path(__file__).resolve().parents[2] / "fixtures" / "commonroad"
 RECORDING = FIXTURES / "USA_US101-4_1_T-1.xml"     # 10 s; 8 vehicles recorded over 0-8 s
@@ -152,14 +154,7 @@ def test_scenes_sweep_skips_with_reasons_resumes_and_dedups(tmp_path):
     assert default_models(out, None, None) == (Path("checkpoints/crash_traffic_us101"),
                                                Path("checkpoints/crash_selector_us101"))
     with pytest.raises(InputError, match="other recordings"):
-        record_commonroad_scenes([str(RECORDING)], 2, out, resume=True, progress=False)
-
-
-def _exit_code(argv: list[str]) -> int:
-    try:
-        return main(argv)
-    except SystemExit as stop:          # argparse's usage errors
-        return stop.code
+        record_scenes(RecordingSweep((str(RECORDING),)), 2, out, resume=True, progress=False)
 
 
 def test_scenes_bad_input_is_one_line(tmp_path, capsys):
@@ -172,7 +167,7 @@ def test_scenes_bad_input_is_one_line(tmp_path, capsys):
              (["--commonroad", str(unknown)], "pass --family"),
              (["--env", "highway-v0", "--seed", "0", "--commonroad", str(RECORDING)], "not allowed with")]
     for args, expected in cases:
-        assert _exit_code(["scenes", *args, "--count", "1", "--out", str(out), "--quiet"]) == 2
+        assert exit_code(["scenes", *args, "--count", "1", "--out", str(out), "--quiet"]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert expected in err[-1] and err[-1].startswith("adversary scenes: error:"), err
         assert "Traceback" not in "\n".join(err) and not out.exists()
@@ -180,7 +175,7 @@ def test_scenes_bad_input_is_one_line(tmp_path, capsys):
 
 def test_attack_runs_on_recorded_scenes(tmp_path):
     scenes = tmp_path / "scenes"
-    record_commonroad_scenes([str(RECORDING)], 1, scenes, progress=False)
+    record_scenes(RecordingSweep((str(RECORDING),)), 1, scenes, progress=False)
     config = AttackConfig(selector="nearest", iterations_closed_loop=4, replan_every=2)
     # A traffic model of another family is refused before any work, in one line naming the fix.
     with pytest.raises(InputError, match="trained on highway windows.*crash_traffic_us101"):

@@ -9,7 +9,7 @@ import pytest
 from adversary.crash.batch import collate
 from adversary.crash.features import FeatureConfig, scene_tensors
 from adversary.crash.judge import judge, rollout
-from adversary.crash.run import record_scenes
+from adversary.crash.scene_sweep import EnvSweep, record_scenes
 from adversary.crash.scenes import AttackScene, load_record, record_attack_scene, save_record
 from adversary.crash.selection import candidates
 from rasterize.errors import InputError
@@ -201,8 +201,8 @@ def test_bad_static_agents_are_input_errors(scene):
 
 def test_scene_index_keeps_the_count_and_a_resume_with_another_is_refused(tmp_path):
     out = tmp_path / "scenes"
-    index = record_scenes("intersection-v0", 0, 1, out, first_episode=2, progress=False, static_agents=2)
+    index = record_scenes(EnvSweep("intersection-v0", 0, first_episode=2, static_agents=2), 1, out, progress=False)
     assert index["static_agents"] == 2 and index["scenes"] == ["scene_00002"]
     assert json.loads((out / "scene_00002.json").read_text())["static_agents"] == 2
     with pytest.raises(InputError, match="--static-agents 2"):
-        record_scenes("intersection-v0", 0, 1, out, first_episode=2, resume=True, progress=False)
+        record_scenes(EnvSweep("intersection-v0", 0, first_episode=2), 1, out, resume=True, progress=False)

@@ -20,6 +20,7 @@ from adversary.export.campaign import OLD_JOB, export_command
 from adversary.export.commonroad import exported_collision_step
 from adversary.report.page import make_report
 from rasterize.commonroad_compat import XMLFileReader
+from tests.adversary.conftest import exit_code
 
 FIXTURES = Path(__file__).resolve().parents[2] / "fixtures" / "commonroad"
 RECORDING = FIXTURES / "USA_US101-4_1_T-1.xml"
@@ -46,13 +47,6 @@ def campaign(tmp_path_factory) -> Path:
 def _records(campaign: Path) -> dict[str, dict]:
     records = [json.loads(p.read_text()) for p in (campaign / "records").glob("*.json")]
     return {f"{r['attack']}@{r['env_id']}": r for r in records}
-
-
-def _exit_code(argv: list[str]) -> int:
-    try:
-        return main(argv)
-    except SystemExit as stop:          # argparse's usage errors
-        return stop.code
 
 
 def test_crash_jobs_export_and_keep_their_collision_step(campaign, tmp_path):
@@ -112,7 +106,7 @@ def test_only_failures_job_resume_and_old_campaigns(campaign, tmp_path, capsys):
              (["--run", str(campaign), "--job", "nope"], "--job nope is not a finished job"),
              (["--run", str(campaign), "--scene", "scene_00000"], "--scene is for `adversary attack` runs")]
     for case, expected in cases:
-        assert _exit_code(["export", *case, "--format", "commonroad", "--out", str(fresh)]) == 2
+        assert exit_code(["export", *case, "--format", "commonroad", "--out", str(fresh)]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and expected in err[0], err
         assert not fresh.exists()

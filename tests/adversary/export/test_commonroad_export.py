@@ -13,11 +13,13 @@ from adversary.cli import main
 from adversary.crash.attack import AttackConfig
 from adversary.crash.judge import braking_track, first_collision, judge, rollout, splice_tracks
 from adversary.crash.recorded import recording_traffic
-from adversary.crash.run import record_commonroad_scenes, run_attacks
+from adversary.crash.run import run_attacks
+from adversary.crash.scene_sweep import RecordingSweep, record_scenes
 from adversary.crash.scenes import AttackScene, load_record, record_attack_scene
 from adversary.export.commonroad import OBSTACLE_ID_OFFSET, write_commonroad
 from rasterize.commonroad_compat import XMLFileReader, XMLFileWriter, region_contains
 from riskmap.registry import cached_planner
+from tests.adversary.conftest import exit_code
 
 FIXTURES = Path(__file__).resolve().parents[2] / "fixtures" / "commonroad"
 RECORDING = FIXTURES / "USA_US101-4_1_T-1.xml"     # as tests/adversary/crash/test_recorded_scenes.py
@@ -29,7 +31,7 @@ def attack_run(tmp_path_factory) -> Path:
     """A one-scene CRASH run on the fixture recording: the first usable vehicle (obstacle 400) as
     the ego, driven by the recordings' IDM/MOBIL, attacked by its nearest neighbour."""
     base = tmp_path_factory.mktemp("export")
-    record_commonroad_scenes([str(RECORDING)], 1, base / "scenes", progress=False)
+    record_scenes(RecordingSweep((str(RECORDING),)), 1, base / "scenes", progress=False)
     config = AttackConfig(selector="nearest", iterations_closed_loop=10, replan_every=10)
     run_attacks("idm", base / "scenes", 1, config, 0, base / "attack", TRAFFIC, None, progress=False)
     return base / "attack"
@@ -159,13 +161,6 @@ def test_collision_step_survives_the_round_trip(attack_run, exported):
     assert sidecar["collision"]["time_step"] == sidecar["collision"]["recomputed_time_step"] == steps[step]
 
 
-def _exit_code(argv: list[str]) -> int:
-    try:
-        return main(argv)
-    except SystemExit as stop:          # argparse's usage errors
-        return stop.code
-
-
 def test_only_failures_plot_resume_and_bad_input(attack_run, exported, tmp_path, capsys):
     name, _ = _only_attack(attack_run)
     out = tmp_path / "failures"
@@ -187,7 +182,7 @@ def test_only_failures_plot_resume_and_bad_input(attack_run, exported, tmp_path,
              (["--run", str(attack_run), "--format", "commonroad", "--out", str(fresh), "--scene", "scene_9"],
               "--scene scene_9")]
     for case, expected in cases:
-        assert _exit_code(["export", *case]) == 2
+        assert exit_code(["export", *case]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and err[0].startswith("adversary export: error:") and expected in err[0], err
         assert not fresh.exists()

@@ -2,7 +2,7 @@
 
 import json
 
-from riskmap.evaluation.guard_tables import intervention_totals, print_table, ratio_cell
+from riskmap.evaluation.guard_tables import intervention_totals, markdown_table, print_table, ratio_cell
 
 
 def test_totals_count_only_guarded_records():
@@ -31,3 +31,9 @@ def test_the_table_is_printed_and_written_with_its_rows(tmp_path, capsys):
     assert (tmp_path / "sub" / "table.md").read_text() == "| tgat | 0.250 |\n"
     print_table(rows, markdown, None)
     assert "| tgat |" in capsys.readouterr().out
+
+
+def test_markdown_table_has_header_rule_and_a_line_per_row():
+    assert markdown_table(("variant", "BDI ratio"), [("tgat", "0.250"), ("alone", None)]) == (
+        "| variant | BDI ratio |\n|---|---|\n| tgat | 0.250 |\n| alone | None |\n")
+    assert markdown_table(("a",), []) == "| a |\n|---|\n"
