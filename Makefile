@@ -10,7 +10,7 @@ STAMP  := $(VENV)/.installed
 TORCH_PIN := torch==2.14.1 torchvision==0.29.1
 DEMO_OUT  ?= out/demo
 
-.PHONY: setup test test-faults test-cluster test-commonroad-oldest test-commonroad-idm demo bench clean
+.PHONY: setup test test-faults test-cluster test-commonroad-oldest test-commonroad-idm demo bench docs clean
 
 setup: $(STAMP)
 
@@ -18,7 +18,7 @@ $(STAMP): pyproject.toml constraints.txt
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --no-cache-dir --upgrade pip
 	$(BIN)/python -m pip install --quiet --no-cache-dir $(TORCH_PIN)
-	$(BIN)/python -m pip install --quiet --no-cache-dir -c constraints.txt -e '.[dev,commonroad,guard,ray]'
+	$(BIN)/python -m pip install --quiet --no-cache-dir -c constraints.txt -e '.[dev,commonroad,guard,ray,docs]'
 	$(BIN)/python -m pip install --quiet --no-cache-dir --no-deps 'commonroad-io==2026.1'   # see pyproject.toml
 	touch $(STAMP)
 
@@ -91,5 +91,11 @@ BENCH_REF ?= HEAD~1
 bench: $(STAMP)
 	$(BIN)/python experiments/bench_all.py --reference $(BENCH_REF)
 
+# The documentation site (mkdocs.yml, docs/) into site/: --strict turns every broken link, reference
+# or docstring warning into an error. The CLI reference is generated from the parsers at build time
+# (docs/hooks/cli_reference.py). NO_MKDOCS_2_WARNING silences mkdocs-material's banner about its successor.
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --site-dir site
+
 clean:
-	rm -rf out .pytest_cache
+	rm -rf out site .pytest_cache

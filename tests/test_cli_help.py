@@ -16,22 +16,14 @@ from adversary.cli import build_parser as adversary_parser
 from adversary.cli import main as adversary_main
 from riskmap.cli import build_parser as riskmap_parser
 from riskmap.cli import main as riskmap_main
-from riskmap.infra.cli import DISTRIBUTION, DefaultsHelpFormatter
+from riskmap.infra.cli import DISTRIBUTION, DefaultsHelpFormatter, walk_commands
 
 _NO_HELP_NEEDED = (argparse._HelpAction, argparse._VersionAction, argparse._SubParsersAction)
 
 
-def _walk(parser: argparse.ArgumentParser, path: str):
-    """(command path, parser) for `parser` and every subparser below it."""
-    yield path, parser
-    for action in parser._actions:
-        if isinstance(action, argparse._SubParsersAction):
-            for name, sub in action.choices.items():
-                yield from _walk(sub, f"{path} {name}")
-
-
 def _parsers():
-    return [*_walk(riskmap_parser(), "riskmap"), *_walk(adversary_parser(), "adversary")]
+    return [(path, parser) for root, name in ((riskmap_parser(), "riskmap"), (adversary_parser(), "adversary"))
+            for path, parser, _ in walk_commands(root, name)]
 
 
 def _options(parser: argparse.ArgumentParser):

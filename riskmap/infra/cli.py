@@ -80,6 +80,17 @@ def add_command_group(subparsers, name: str, help: str, dest: str):
     return subparsers.add_parser(name, help=help).add_subparsers(dest=dest, required=True)
 
 
+def walk_commands(parser: argparse.ArgumentParser, path: str, summary: str = ""):
+    """(command path, parser, one-line summary) for `parser` and every subcommand below it, nested
+    ones included, in the order `--help` lists them (for the help tests and the docs reference)."""
+    yield path, parser, summary
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            helps = {choice.dest: choice.help or "" for choice in action._choices_actions}
+            for name, sub in action.choices.items():
+                yield from walk_commands(sub, f"{path} {name}", helps.get(name, ""))
+
+
 def add_run_options(parser: argparse.ArgumentParser, func, *, resume: str | None = None,
                     quiet: str = QUIET_HELP) -> None:
     """The tail every working command's parser ends with: `--resume` (when `resume`, its help text:
