@@ -270,19 +270,10 @@ def natural_record(result, scene: RecordedScene, safety, driver: str | None = No
 def classify_recorded_collision(result, partner: int, step: int, lanes=()) -> dict:
     """`riskmap.sim.records.failures.classify_failure` of a natural drive's contact on a recording (no
     attack to validate); with `lanes`, lane changes that keep the box on them count too."""
-    from riskmap.sim.records.failures import classify_failure
-    from riskmap.sim.records.metrics import box_off_road, drivable_area
-
-    on_road, lane_m = None, None
-    if lanes:
-        area = drivable_area(lanes)
-        lane_m = float(np.median([lane.width_m for lane in lanes]))
-
-        def on_road(centre, heading, length, width):
-            return not box_off_road(np.array([*centre, *heading]), (length, width), area)
+    from riskmap.sim.records.failures import classify_failure, road_rules
 
     return classify_failure(result.states, result.valid, result.sizes, result.ego, partner, step, result.dt_s,
-                            on_road=on_road, lane_width_m=lane_m, from_step=result.t0_step)
+                            **road_rules(lanes), from_step=result.t0_step)
 
 
 def natural_recorded_job(job) -> tuple[dict, bytes]:

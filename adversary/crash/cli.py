@@ -1,5 +1,6 @@
 """The CRASH subcommands: `adversary train-traffic` (the traffic CVAE), `train-selector` (ASM),
-`scenes` (record held-out attack scenes) and `attack` (select, generate, judge)."""
+`scenes` (record held-out attack scenes), `attack` (select, generate, judge) and `evaluate` (the
+planner benchmark on the stored scenes, unattacked)."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from riskmap.registry import SPEC_HELP, display_name
 from riskmap.infra.cli import (
     add_config_options,
     add_run_options,
+    comma_list,
     config_from_args,
     non_negative_int,
     positive_float,
@@ -137,6 +139,22 @@ def _run_attack(args: argparse.Namespace) -> int:
     return 0
 
 
+def _run_evaluate(args: argparse.Namespace) -> int:
+    from adversary.crash.evaluate_source import AttackSceneSource
+    from rasterize.errors import InputError
+    from riskmap.evaluation.evaluate import evaluate
+
+    planners = comma_list(args.planners)
+    if not planners:
+        raise InputError(f"--planners {args.planners!r} names no planner; give comma-separated "
+                         "SPECs, e.g. replay,idm,cv")
+    source = AttackSceneSource(args.scenes, count=args.count, seed=args.seed)
+    evaluate(source, planners, Path(args.out), workers=args.workers, resume=args.resume,
+             progress=not args.quiet)
+    print((Path(args.out) / "table.md").read_text(), end="")
+    return 0
+
+
 def add_attack_parsers(subparsers) -> None:
     from adversary.crash.config import SELECTOR_OBJECTIVES
     from adversary.crash.generate import TIME_WEIGHTINGS
@@ -229,5 +247,23 @@ def add_attack_parsers(subparsers) -> None:
     p.add_argument("--panels", type=non_negative_int, default=0, help="write PNG panels of the first N scenes")
     add_run_options(p, _run_attack,
                     resume="continue an interrupted run in --out (the scenes already attacked are kept)")
+
+    p = subparsers.add_parser("evaluate", help="closed-loop benchmark of planners (riskmap evaluate's "
+                                               "Table I metrics) on stored attack scenes, driven without "
+                                               "an attack")
+    p.add_argument("--scenes", required=True,
+                   help="a directory from `adversary scenes`: its scenes, in index order, are the episodes")
+    p.add_argument("--planners", required=True, help="comma-separated; each a " + SPEC_HELP)
+    p.add_argument("--out", required=True,
+                   help="run directory (OUT/table.md, OUT/results.json, OUT/episodes.csv, per-episode "
+                        "records OUT/episodes/<planner>/<scene>.json)")
+    p.add_argument("--count", type=positive_int, default=None,
+                   help="evaluate the first N scenes of --scenes (default: every one)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the planners")
+    p.add_argument("--workers", type=positive_int, default=1,
+                   help="processes driving episodes (the results do not depend on it)")
+    add_run_options(p, _run_evaluate,
+                    resume="continue an interrupted evaluation in --out (finished episodes are kept; it "
+                           "may name more planners or a larger --count)")
 
 

@@ -80,5 +80,8 @@ class HighwaySource:
         return HighwayWorld(run, planner, config.loop(), DriveHooks(on_ready=(_no_contact_response,)),
                             scene.episode, scene.env_id)
 
+    def handover_step(self, record: SceneRecord) -> int:
+        return 0                          # the planner drives the whole log
+
 
 HIGHWAY_SOURCE = HighwaySource()

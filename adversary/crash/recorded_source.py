@@ -216,5 +216,8 @@ class RecordedSource:
         loop = LoopConfig(world.n_steps, control_hz // replan_hz, HISTORY_S, config.gap_radius_m)
         return RecordedWorld(world, driver, loop, DriveHooks(), record, log, traffic, planner, planner_spec)
 
+    def handover_step(self, record: SceneRecord) -> int:
+        return record.t0_step             # the human's record up to t0, the planner's drive after
+
 
 RECORDED_SOURCE = RecordedSource()

@@ -60,6 +60,10 @@ class SceneSource(Protocol):
               replan_hz: int) -> SceneWorld:
         """The world in which `planner` drives against `log` (the scene's spliced log)."""
 
+    def handover_step(self, record: SceneRecord) -> int:
+        """The log step at which the planner takes the ego over (before it the ego is the human's
+        record): what a drive is measured from (`adversary.crash.evaluate_source`)."""
+
 
 def scene_source(scene: AttackScene) -> SceneSource:
     """The source of `scene`'s kind: a scene cut from a recording names it (`scene.recording`)."""

@@ -1,6 +1,6 @@
 """`riskmap evaluate`: the planner benchmark (planner paper Table I) in closed loop, on any source
 of scenarios (`riskmap.evaluation.sources`: highway-env seeds with `--env`, the recorded vehicles
-of CommonRoad files with `--commonroad`).
+of CommonRoad files with `--commonroad`; stored attack scenes, unattacked, with `adversary evaluate`).
 
 Every scenario's recorded log is made first where the source makes one (highway-env: the
 IDM/MOBIL human, OUT/logs/episode_NNNNNN.npz); then every planner drives every scenario. Its

@@ -594,6 +594,7 @@ GUARD_DATA = ("adversary", "guard-data")
 TRAFFIC = ("adversary", "train-traffic")
 HARDEN = ("adversary", "harden")
 EXPORT = ("adversary", "export")
+ADV_EVAL = ("adversary", "evaluate")
 
 
 def R(id, argv, names, **kw):
@@ -1225,6 +1226,25 @@ add(
     attack_row("out-under-file", SC(), UNDER_FILE_NAMES, out_arg=under_file, out=under_file),
 )
 
+
+def adv_eval_row(id, scenes, names, *extra, planners="replay", **kw):
+    return R(f"adversary-evaluate/{id}", _argv(*ADV_EVAL, "--scenes", scenes, "--planners", planners, "--quiet",
+                                               *extra, "--out", kw.pop("out_arg", OUT)), names, **kw)
+
+
+add(
+    adv_eval_row("scenes-missing", missing("noscenes"), S(missing("noscenes"))),
+    adv_eval_row("scenes-no-index", lambda fx, t: fx.dir("empty_dir"), S(lambda fx, t: fx.dir("empty_dir"))),
+    adv_eval_row("index-truncated", SC("half_index"), S(SC("half_index"))),
+    adv_eval_row("scene-truncated", SC("half_scene"), S("scene_00000.npz")),
+    adv_eval_row("scene-nan", SC("nan_scene"), S("scene_00000.npz")),
+    adv_eval_row("count-too-many", SC(), S("--count"), "--count", "5"),
+    adv_eval_row("count-zero", SC(), S("--count"), "--count", "0", usage=True),
+    adv_eval_row("planner-nosuch", SC(), S("nosuch"), planners="replay,nosuch"),
+    adv_eval_row("planners-empty", SC(), S("--planners"), planners=","),
+    adv_eval_row("out-under-file", SC(), UNDER_FILE_NAMES, out_arg=under_file, out=under_file),
+)
+
 # adversary harden: the intersection checkpoint with its kind of data, highway attack scenes
 def harden_row(id, names, *, checkpoint=RM, natural=None, scenes=None, extra=(), **kw):
     return R(f"harden/{id}", _argv(*HARDEN, "--checkpoint", checkpoint, "--natural", natural or ds(),
@@ -1436,4 +1456,4 @@ def test_every_command_has_rows():
         "collect", "train", "train-baseline", "drive", "check-planner", "evaluate", "tune-goal-variance", "figures-scenes",
         "figures-plans", "guard-collect", "guard-train", "guard-evaluate", "stress-test", "report", "search",
         "search-report", "train-selector", "scenes", "attack", "guard-data", "train-traffic", "harden",
-        "export"}
+        "export", "adversary-evaluate"}

@@ -19,16 +19,17 @@ Two sources: `EnvSource` (highway-env seeds: an env id, a seed and a number of e
 replaying the human's log or reacting) and `RecordingSource` (the recorded vehicles of CommonRoad
 files, `--mode`, `--goal`, `--max-episodes` drawn with the seed).
 
-A third, the stored attack scenes, would live in adversary (a higher layer: it may import this
-package, never the other way round): a frozen `AttackSceneSource(scenes_dir, seed, mode)`
-whose `scenarios()` are the stored `SceneRecord`s (`adversary.crash.scenes.load_record`) by file
-name; `prepared` true and `prepare` a no-op (the scene already holds its recorded `HumanLog`,
-highway-env or `adversary.crash.recorded`'s); `recorded_log` that log; `drive` the scene's closed
-loop without an attack, through the world its kind builds (`adversary.crash.scene_source`:
-`HighwaySource`, `RecordedSource`, the ones `judge.rollout` already uses) and the
-record it returns; `row` that record with
-`episode` set to the scene's name; `applies` by family. `evaluate(AttackSceneSource(...),
-planners, out)` then writes the same results.json, episodes.csv and table.md as the other two.
+The third, the stored attack scenes, lives in adversary (a higher layer: it may import this
+package, never the other way round): `adversary.crash.evaluate_source.AttackSceneSource(scenes_dir,
+count, seed)`, the command `adversary evaluate`. Its `scenarios()` are the first `count` scenes of
+the directory's index.json, in order (`adversary.crash.scenes.load_record`); `prepared` true and
+`prepare` a no-op (the scene already holds its recorded `HumanLog`, highway-env or
+`adversary.crash.recorded`'s); `recorded_log` that log; `drive` the scene's closed loop without an
+attack, `adversary.crash.judge.rollout` with no generated tracks, through the world its kind builds
+(`adversary.crash.scene_source`: `HighwaySource`, `RecordedSource`), measured from the handover
+(`SceneSource.handover_step`); `row` that record with `episode` set to the scene's name; `applies`
+jerk and the human's distance (no red lights). `evaluate(AttackSceneSource(...), planners, out)`
+writes the same results.json, episodes.csv and table.md as the other two.
 
 Implementations are frozen dataclasses: workers get them pickled, and results must not depend on
 which process ran a scenario.

@@ -290,6 +290,22 @@ def attack_validity(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, eg
     return {"valid": not reasons, "reasons": reasons, "kinematics": kinematics, "hit_agents": hits}
 
 
+def road_rules(lanes) -> dict:
+    """`classify_failure`'s `on_road` and `lane_width_m` from a recording's lanes (its drivable
+    area and median lane width), so lane changes that keep the box on them count as on the road;
+    no lanes: neither (the classifier's defaults)."""
+    from riskmap.sim.records.metrics import box_off_road, drivable_area
+
+    if not lanes:
+        return {}
+    area = drivable_area(lanes)
+
+    def on_road(centre, heading, length, width):
+        return not box_off_road(np.array([*centre, *heading]), (length, width), area)
+
+    return {"on_road": on_road, "lane_width_m": float(np.median([lane.width_m for lane in lanes]))}
+
+
 def classify_failure(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, ego: int, other: int,
                      collision_step: int, dt_s: float, *, attack: bool = False, on_road=None,
                      lane_width_m: float | None = None, adversary_off_road: bool | None = None,

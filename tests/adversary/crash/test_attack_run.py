@@ -8,20 +8,11 @@ import torch
 from adversary.cli import main
 from adversary.crash.attack import AttackConfig
 from adversary.crash.run import run_attacks, summarise, table_row
-from adversary.crash.scene_sweep import EnvSweep, record_scenes
 from adversary.crash.selection import SelectionModule
 from rasterize.errors import InputError
 from riskmap.infra.checkpoint import save_checkpoint
 
 TRAFFIC = "checkpoints/crash_traffic_highway"
-
-
-@pytest.fixture(scope="module")
-def scenes(tmp_path_factory):
-    out = tmp_path_factory.mktemp("scenes") / "highway"
-    # seed 500 episode 1: the car ahead in the next lane can cut in front of the replayed human
-    record_scenes(EnvSweep("highway-v0", 500, first_episode=1), 2, out, progress=False)
-    return out
 
 
 @pytest.fixture(scope="module")
