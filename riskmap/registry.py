@@ -57,7 +57,7 @@ SPEC_HELP = ("planner SPEC: idm, yielding, cv, replay (recordings), riskmap:PATH
              "cnn_lstm:PATH, rvsg:PATH, guard:SPEC, your own py:package.module:Factory[?key=value&...], "
              "a CommonRoad planner cr:package.module:Factory[?predict=none|cv|toolkit&key=value&...] "
              "(the key name=NAME sets its name in tables and figures) or an installed plug-in NAME:ARG "
-             "(README, \"Your own planner\")")
+             "(docs/guide/your-own-planner.md)")
 # A display name goes into tables, figure titles and file names: one path component, no spaces.
 NAME_PATTERN = r"[A-Za-z0-9][A-Za-z0-9._+-]{0,63}"
 NAME_KEY = "name"
@@ -227,7 +227,7 @@ def _made(spec: str, factory, *args, **kwargs):
     if not is_planner(planner):
         raise InputError(f"planner {spec!r} made a {type(planner).__name__}, not a planner; its "
                          "factory must return an object with reset(scene) and plan(scene) -> Plan "
-                         "(README, the planner contract)")
+                         "(docs/guide/your-own-planner.md, \"The planner contract\")")
     return planner
 
 

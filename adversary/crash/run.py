@@ -202,8 +202,8 @@ def _paragraph(text: str) -> str:
 
 # Under every written table: where its columns are defined.
 TABLE_NOTE = ("Columns: valid avoidable at-fault = the failures that count, over every scene; valid, avoidable "
-              "and fault classes count wins (riskmap/sim/records/failures.py; README, \"Failures that count\"); "
-              "solution % = STRIVE's hindsight check.")
+              "and fault classes count wins (riskmap/sim/records/failures.py; "
+              "docs/guide/failures-that-count.md); solution % = STRIVE's hindsight check.")
 
 
 def run_attacks(planner_spec: str, scenes_dir: Path, count: int, config: AttackConfig, seed: int,

@@ -9,7 +9,7 @@ it generates is written to disk or committed.
 
 It also replaces `<!-- planner-declarations -->` in `reference/api.md` with the table of a
 planner's optional declarations, made by `riskmap.sim.loop.plan.declarations_table` from
-`PlannerTraits` (the same table the README carries).
+`PlannerTraits` (the same table docs/guide/your-own-planner.md carries, checked by a test).
 
 Registered under `hooks:` in mkdocs.yml.
 """

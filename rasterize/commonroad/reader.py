@@ -22,8 +22,8 @@ def load_scenario(path: str | Path):
         from rasterize.commonroad_compat import XMLFileReader
     except ImportError:
         raise InputError("reading CommonRoad files needs the commonroad-io package (2024.3 to "
-                         "2026.x); install it as the README's `riskmap collect --from-commonroad` "
-                         "section says") from None
+                         "2026.x); install it as docs/guide/collect.md, `riskmap collect "
+                         "--from-commonroad`, says") from None
     try:
         # commonroad-io logs a warning per old-style lanelet successor tag ("successorRight ...
         # is of deprecated format"): hundreds per Lankershim file, none of them actionable.

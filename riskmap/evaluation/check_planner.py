@@ -1,5 +1,6 @@
 """`riskmap check-planner SPEC`: drive a planner on a few scenes of each family and say, one line
-each, where it breaks the planner contract (README, "The planner contract").
+each, where it breaks the planner contract (docs/guide/your-own-planner.md, "The planner
+contract").
 
 The planner drives short closed-loop episodes through the one rollout loop. Every plan it makes is
 checked (`riskmap.sim.loop.plan_checks.plan_problems`, the checks the loop itself counts in every

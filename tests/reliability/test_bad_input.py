@@ -1,10 +1,11 @@
 """Reliability suite, part 2: a table-driven sweep of bad input over every command.
 
 Each row is one command line of `riskmap` or `adversary`, built from small fixture files, and the
-input it breaks. Every row must end the same way (README, "Bad input"): exit status 2, exactly
-one line on stderr (after argparse's usage block, for malformed flags) that names the offending
-flag or path and says what to do, no traceback, and no partial output: an `--out` that did not
-exist does not exist afterwards, one that existed keeps its listing (names, sizes, mtimes).
+input it breaks. Every row must end the same way (docs/guide/command-line.md, "Bad input"):
+exit status 2, exactly one line on stderr (after argparse's usage block, for malformed flags) that
+names the offending flag or path and says what to do, no traceback, and no partial output: an
+`--out` that did not exist does not exist afterwards, one that existed keeps its listing (names,
+sizes, mtimes).
 
 Commands with a progress bar run with --quiet (as scripts run them). The rows run in process
 (`riskmap.cli.main`, `adversary.cli.main`); a few go through the installed entry points too.

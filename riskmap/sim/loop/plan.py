@@ -125,7 +125,8 @@ def _declared(default, meaning: str, read_by: str):
 class PlannerTraits:
     """Every optional declaration a planner may make, as an attribute of the same name, with the
     default a planner that does not declare it gets. The one list: `traits_of` reads a planner
-    by it, and the README's table of declarations is made from it (`declarations_table`)."""
+    by it, and the table of declarations in docs/guide/your-own-planner.md is made from it
+    (`declarations_table`)."""
 
     drives_itself: bool = _declared(
         False, "the world's own IDM/MOBIL ego keeps driving; `plan` is never called",
@@ -163,7 +164,8 @@ def traits_of(planner) -> PlannerTraits:
 
 
 def declarations_table() -> str:
-    """The README's Markdown table of the optional declarations, one row per `PlannerTraits` field."""
+    """The Markdown table of the optional declarations (docs/guide/your-own-planner.md, "The planner
+    contract"), one row per `PlannerTraits` field."""
     rows = ["| declaration | default | meaning |", "| --- | --- | --- |"]
     for f in fields(PlannerTraits):
         rows.append(f"| `{f.name}` | `{f.default!r}` | {f.metadata['meaning']} |")

@@ -174,8 +174,9 @@ def implausible_note(rows: dict, unit: str = "episodes") -> str:
              if s.get(NO_SOLUTION_FIELD)]
     text = ""
     if parts:
-        text += ("Implausible plans (they break the planner contract's checks, README \"The planner "
-                 "contract\"; they were driven as made): " + " | ".join(parts) + "\n")
+        text += ("Implausible plans (they break the planner contract's checks, "
+                 "docs/guide/your-own-planner.md, \"The planner contract\"; they were driven as "
+                 "made): " + " | ".join(parts) + "\n")
     if stuck:
         text += ("No solution (the planner returned no trajectory; the ego braked until its next "
                  "plan): " + " | ".join(stuck) + "\n")
