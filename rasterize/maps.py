@@ -78,9 +78,9 @@ def footprint_maps(centres: np.ndarray, headings: np.ndarray, layer: np.ndarray,
     offsets = _subcell_offsets(grid).astype(np.float32)                      # [S, 2]
     # float32 throughout: the maps are float32 and 1e-7 of a peak of 1 is far below what the
     # 4-sigma cut below leaves out (e^-8 = 3e-4); the exponentials are most of the time.
-    density = np.zeros((layers, grid.rows, grid.cols, offsets.shape[0]), np.float32)
+    maps = np.zeros((layers, grid.rows, grid.cols), np.float32)
     if not len(centres):
-        return density.mean(axis=3)
+        return maps
     # Only points within 4 sigma of an agent can hold more than e^-8 of it: each agent is drawn on
     # the cells that hold a sub-sample point inside the bounding box of its 4-sigma ellipse
     # (half sides 4 sqrt((sy cos h)^2 + (sx sin h)^2) along x and the same with sin/cos swapped
@@ -110,15 +110,32 @@ def footprint_maps(centres: np.ndarray, headings: np.ndarray, layer: np.ndarray,
     along = dx * cos + dy * sin                                              # in sigmas
     across = dy * cos_x - dx * sin_x
     patches = np.exp(np.float32(-0.5) * (along * along + across * across))  # [M, P, Q, S]
-    for m in range(len(centres)):
-        r0, c0 = max(first[m, 0], 0), max(first[m, 1], 0)
-        r1, c1 = min(last[m, 0], grid.rows - 1), min(last[m, 1], grid.cols - 1)
-        if r0 > r1 or c0 > c1:
-            continue
-        window = density[layer[m], r0:r1 + 1, c0:c1 + 1]
-        pr, pc = r0 - first[m, 0], c0 - first[m, 1]
-        np.maximum(window, patches[m, pr:pr + r1 - r0 + 1, pc:pc + c1 - c0 + 1], out=window)
-    return density.mean(axis=3)
+    # The patch cells inside both the agent's own window and the grid, as flat cell numbers
+    # (layer, row, col). Agents combine by maximum per sub-sample point, then each cell is the
+    # mean over its sub-samples: a cell one agent alone covers is the mean of its patch there; a
+    # cell several cover (rare: agents of one layer close together), the mean of their maximum.
+    # Only covered cells are written: the rest stay 0, as a maximum with nothing leaves them.
+    keep_rows = (rows >= 0) & (rows < grid.rows) & (rows <= last[:, :1])   # [M, P]
+    keep_cols = (cols >= 0) & (cols < grid.cols) & (cols <= last[:, 1:])   # [M, Q]
+    keep = keep_rows[:, :, None] & keep_cols[:, None, :]                     # [M, P, Q]
+    layer = np.asarray(layer).reshape(-1)
+    cell = ((layer[:, None, None] * grid.rows + rows[:, :, None]) * grid.cols
+            + cols[:, None, :])[keep]                                        # [N]
+    if not len(cell):
+        return maps
+    points = patches[keep]                                                   # [N, S]
+    flat = maps.reshape(-1)
+    flat[cell] = points.mean(axis=1)
+    order = np.argsort(cell, kind="stable")
+    ordered = cell[order]
+    new_cell = np.concatenate([[True], ordered[1:] != ordered[:-1], [True]])   # [N + 1]
+    if not new_cell.all():
+        bounds = np.flatnonzero(new_cell)                                    # group starts, N
+        shared = np.flatnonzero(np.diff(bounds) > 1)
+        stack = points[order]
+        for start, end in zip(bounds[shared], bounds[shared + 1]):
+            flat[ordered[start]] = stack[start:end].max(axis=0).mean()
+    return maps
 
 
 def goal_map(goal_cell: tuple[int, int], grid: GridConfig, variance: float = 5.0) -> np.ndarray:

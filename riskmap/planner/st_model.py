@@ -114,6 +114,55 @@ class SpaceTimeRiskMapGenerator(RiskMapGenerator):
         logits = self.head["rest"](hidden.flatten(0, 1)).view(b, steps, g, g)
         return F.logsigmoid(logits), goal[:, 0]
 
+    @torch.inference_mode()
+    def planning_maps(self, raster: torch.Tensor, motion: torch.Tensor, evidence: torch.Tensor,
+                      route_goal: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """`forward`'s (rewards, goal map) for planning, without autograd: the same encoder and
+        step convolution, and the head's 1×1 layers as matrix products over the [T G², h]
+        channels-last pixels, in place. forward runs them as 1×1 convolutions on [B T, h, G, G],
+        which on one CPU thread go through torch's slow unfolding path (a bias copy, a strided
+        add, then the product): the 50×50 head took 6.6 ms there, 5.2 here, the same numbers
+        bit for bit on one thread (experiments/README.md, "Space-time plan latency")."""
+        g, steps = self.config.resolution, self.spacetime.steps
+        b, channels = raster.shape[0], len(EVIDENCE_CHANNELS)
+        if evidence.shape[1:] != (steps, channels, g, g):
+            raise InputError(f"evidence must be [B, {steps}, {channels}, {g}, {g}], "
+                             f"got {tuple(evidence.shape)}")
+        features = self.encoder_conv(self.backbone(raster))
+        if features.shape[-2:] != (g, g):
+            mode = "area" if features.shape[-1] > g else "bilinear"
+            features = F.interpolate(features, size=(g, g), mode=mode,
+                                     **({} if mode == "area" else {"align_corners": False}))
+        head, pixels = self.head, g * g
+        base_w, base_b = _matrix(head["base"]), head["base"].bias
+        goal_w, goal_b = _matrix(head["goal"]), head["goal"].bias
+        hidden_w, hidden_b = _matrix(head["rest"][1]), head["rest"][1].bias
+        out_w, out_b = _matrix(head["rest"][3]), head["rest"][3].bias
+        time = torch.arange(1, steps + 1, dtype=evidence.dtype, device=evidence.device) / steps
+        time = time.view(1, steps, 1, 1, 1).expand(b, steps, 1, g, g)
+        step_in = torch.cat([evidence, time], dim=2).flatten(0, 1)             # [B T, E + 1, G, G]
+        # The 3×3 step convolution as forward runs it (oneDNN is fastest on channels-last),
+        # its output read as [B, T, G², h] channels-last pixels.
+        steps_out = head["step"](step_in.contiguous(memory_format=torch.channels_last))
+        steps_out = steps_out.permute(0, 2, 3, 1).reshape(b, steps, pixels, -1)
+        rewards = features.new_empty((b, steps * pixels, 1))
+        goals = features.new_empty((b, pixels, 1))
+        for i in range(b):
+            inputs = torch.cat([features[i].permute(1, 2, 0), motion[i].permute(1, 2, 0)],
+                               dim=2).reshape(pixels, -1)                  # [G², C + 3]
+            base = torch.addmm(base_b, inputs, base_w)                      # [G², h]
+            torch.addmm(goal_b, torch.cat([inputs, route_goal[i].reshape(pixels, 1)], dim=1),
+                        goal_w, out=goals[i])
+            hidden = steps_out[i].add_(base).relu_().view(steps * pixels, -1)  # [T G², h]
+            hidden = torch.addmm(hidden_b, hidden, hidden_w).relu_()
+            torch.addmm(out_b, hidden, out_w, out=rewards[i])
+        return F.logsigmoid(rewards).view(b, steps, g, g), F.logsigmoid(goals).view(b, g, g)
+
+
+def _matrix(conv: nn.Conv2d) -> torch.Tensor:
+    """A 1×1 convolution's weight as the [in, out] matrix that multiplies channels-last pixels."""
+    return conv.weight[:, :, 0, 0].t()
+
 
 ROUTE_GOAL_GAIN, ROUTE_GOAL_OFFSET = 20.0, -10.0     # the goal head's start (module docstring)
 

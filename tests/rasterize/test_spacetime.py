@@ -122,3 +122,21 @@ def test_footprint_maps_match_a_float64_reference_without_a_cut(extent_rows_cols
     assert drawn.dtype == np.float32 and drawn.shape == (3, rows, cols)
     assert expected.max() > 0.2                       # the agents are on the grid
     np.testing.assert_allclose(drawn, expected, rtol=0, atol=np.exp(-8.0) + 1e-6)
+
+
+def test_agents_sharing_cells_combine_by_maximum():
+    """Two agents of one layer on the same spot draw what one draws; a third beside them raises
+    the cells it covers to its own values where those are larger, in each layer apart."""
+    from rasterize.config import Extent, GridConfig
+    from rasterize.maps import footprint_maps
+
+    grid = GridConfig(Extent(10.0, 10.0, 10.0, 10.0), 20, 20)
+    one = footprint_maps(np.array([[1.0, 2.0]]), np.array([0.3]), np.array([0]), 2, grid)
+    two = footprint_maps(np.array([[1.0, 2.0], [1.0, 2.0]]), np.array([0.3, 0.3]),
+                         np.array([0, 0]), 2, grid)
+    np.testing.assert_array_equal(one, two)
+    beside = footprint_maps(np.array([[1.5, 2.5]]), np.array([0.0]), np.array([0]), 2, grid)
+    both = footprint_maps(np.array([[1.0, 2.0], [1.5, 2.5]]), np.array([0.3, 0.0]),
+                          np.array([0, 0]), 2, grid)
+    assert (both >= np.maximum(one, beside) - 1e-7).all() and not both[1].any()
+    assert (both > np.maximum(one, beside)).any()     # per sub-sample maximum, then the mean

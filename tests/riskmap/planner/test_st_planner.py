@@ -178,3 +178,31 @@ def test_the_reach_envelope_prices_exactly_the_cells_the_speed_cannot_reach():
             expected = ((x > hi + row_m) | (x < lo - row_m)) * 7.0
             np.testing.assert_array_equal(penalty[k], expected)
     assert not ReachConfig().penalty(5.0, grid, 12, 0.5).any()        # weight 0: off
+
+
+def test_planning_maps_are_forwards_maps_against_a_float64_reference():
+    """The planner's inference path (`planning_maps`, on the `for_inference` copy the planner
+    runs, channels-last raster) computes forward's rewards and goal map: against forward in
+    float64 of the same weights, to float32 rounding."""
+    from riskmap.planner.model import for_inference
+
+    torch.manual_seed(0)
+    st = SpaceTimeRiskMapGenerator(ModelConfig(in_channels=8, resolution=12),
+                                   SpaceTimeConfig(steps=4)).eval()
+    with torch.no_grad():
+        for parameter in st.head.parameters():       # a step part that is not zero, as trained
+            parameter.uniform_(-0.5, 0.5)
+    raster = (torch.rand(2, 8, 200, 200) > 0.7).float()
+    motion, route = torch.rand(2, 3, 12, 12), torch.rand(2, 12, 12)
+    evidence = torch.rand(2, 4, 2, 12, 12) * (torch.rand(2, 4, 2, 12, 12) > 0.6)
+    with torch.no_grad():
+        expected = st.double()(raster.double(), motion.double(), evidence.double(), route.double())
+    fast = for_inference(st.float())
+    reward, goal = fast.planning_maps(raster.contiguous(memory_format=torch.channels_last), motion,
+                                      evidence, route)
+    assert reward.dtype == goal.dtype == torch.float32
+    assert reward.shape == (2, 4, 12, 12) and goal.shape == (2, 12, 12)
+    torch.testing.assert_close(reward.double(), expected[0], rtol=1e-5, atol=1e-5)
+    torch.testing.assert_close(goal.double(), expected[1], rtol=1e-5, atol=1e-5)
+    with pytest.raises(InputError):
+        fast.planning_maps(raster, motion, evidence[:, :3], route)
