@@ -88,12 +88,10 @@ class SpaceTimeRiskMapGenerator(RiskMapGenerator):
         })
         _route_goal_start(self.head["goal"])
 
-    def forward(self, raster: torch.Tensor, motion: torch.Tensor, evidence: torch.Tensor,
-                route_goal: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """(rewards r_1 … r_T [B, T, G, G], goal map g [B, G, G]), both ≤ 0 (log space);
-        route_goal [B, G, G] is the route rule's goal map in [0, 1]."""
+    def _features(self, raster: torch.Tensor, evidence: torch.Tensor) -> torch.Tensor:
+        """The encoder's features at the grid's resolution [B, C, G, G], once the evidence's
+        shape is checked (InputError naming the expected shape otherwise)."""
         g, steps = self.config.resolution, self.spacetime.steps
-        b = raster.shape[0]
         if evidence.shape[1:] != (steps, len(EVIDENCE_CHANNELS), g, g):
             raise InputError(f"evidence must be [B, {steps}, {len(EVIDENCE_CHANNELS)}, {g}, {g}], "
                              f"got {tuple(evidence.shape)}")
@@ -102,6 +100,15 @@ class SpaceTimeRiskMapGenerator(RiskMapGenerator):
             mode = "area" if features.shape[-1] > g else "bilinear"
             features = F.interpolate(features, size=(g, g), mode=mode,
                                      **({} if mode == "area" else {"align_corners": False}))
+        return features
+
+    def forward(self, raster: torch.Tensor, motion: torch.Tensor, evidence: torch.Tensor,
+                route_goal: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(rewards r_1 … r_T [B, T, G, G], goal map g [B, G, G]), both ≤ 0 (log space);
+        route_goal [B, G, G] is the route rule's goal map in [0, 1]."""
+        g, steps = self.config.resolution, self.spacetime.steps
+        b = raster.shape[0]
+        features = self._features(raster, evidence)
         inputs = torch.cat([features, motion], dim=1)
         base = self.head["base"](inputs)                                        # [B, h, G, G]
         goal = F.logsigmoid(self.head["goal"](torch.cat([inputs, route_goal[:, None]], dim=1)))
@@ -124,15 +131,8 @@ class SpaceTimeRiskMapGenerator(RiskMapGenerator):
         add, then the product): the 50×50 head took 6.6 ms there, 5.2 here, the same numbers
         bit for bit on one thread (experiments/README.md, "Space-time plan latency")."""
         g, steps = self.config.resolution, self.spacetime.steps
-        b, channels = raster.shape[0], len(EVIDENCE_CHANNELS)
-        if evidence.shape[1:] != (steps, channels, g, g):
-            raise InputError(f"evidence must be [B, {steps}, {channels}, {g}, {g}], "
-                             f"got {tuple(evidence.shape)}")
-        features = self.encoder_conv(self.backbone(raster))
-        if features.shape[-2:] != (g, g):
-            mode = "area" if features.shape[-1] > g else "bilinear"
-            features = F.interpolate(features, size=(g, g), mode=mode,
-                                     **({} if mode == "area" else {"align_corners": False}))
+        b = raster.shape[0]
+        features = self._features(raster, evidence)
         head, pixels = self.head, g * g
         base_w, base_b = _matrix(head["base"]), head["base"].bias
         goal_w, goal_b = _matrix(head["goal"]), head["goal"].bias
