@@ -55,11 +55,11 @@ def test_frames_of_a_planner_without_a_raster_and_of_one_that_makes_no_plans(tmp
 
 def test_drive_frames_of_cv_from_the_command_line(tmp_path, monkeypatch):
     from riskmap.cli import main
-    from riskmap.sim.loop import rollout
+    from riskmap.sim.worlds import highway_drive
 
     # The command line has no episode length: a 2 s highway episode keeps this to four frames.
-    short = dataclasses.replace(rollout.FAMILY_SETUPS["highway"], episode_s=2.0)
-    monkeypatch.setitem(rollout.FAMILY_SETUPS, "highway", short)
+    short = dataclasses.replace(highway_drive.FAMILY_SETUPS["highway"], episode_s=2.0)
+    monkeypatch.setitem(highway_drive.FAMILY_SETUPS, "highway", short)
     out = tmp_path / "cv"
     assert main(["drive", "--frames", "--planner", "cv", "--env", "highway-v0", "--episodes", "1",
                  "--out", str(out), "--quiet"]) == 0
