@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from rasterize.frames import ego_from_world, ego_pose
-from riskmap.sim.loop.plan import PLAN_DT_S, PLAN_STEPS, Plan
+from riskmap import PLAN_DT_S, PLAN_STEPS, Plan     # the public planner contract
 
 
 class GapKeeper:
