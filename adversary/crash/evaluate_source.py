@@ -21,12 +21,12 @@ plan times are the drive's record. Red-light violations are not counted on these
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from adversary.crash.scene_sweep import read_index
 from rasterize.errors import InputError
 
 KIND = "attack_scenes"
@@ -34,22 +34,6 @@ MODE = "log"           # the other vehicles always replay the scene's log; no at
 
 # This process's loaded scenes (`load_record` reads the npz and cuts the window once).
 _RECORDS: dict = {}
-
-
-def read_index(scenes_dir: Path) -> dict:
-    """The index.json of a scene directory; InputError naming it when it is missing or damaged."""
-    from adversary.crash.scene_sweep import INDEX
-
-    scenes_dir = Path(scenes_dir)
-    try:
-        index = json.loads((scenes_dir / INDEX).read_text())
-        names = index["scenes"]
-        if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
-            raise ValueError("scenes is not a list of names")
-    except (OSError, ValueError, KeyError, TypeError):
-        raise InputError(f"--scenes {scenes_dir} holds no readable scene index ({INDEX}); make one with "
-                         "`adversary scenes`") from None
-    return index
 
 
 def _record(path: Path):
@@ -226,4 +210,4 @@ def drive_record(record, result, spec: str, name: str, start: int) -> dict:
                "rollout_s": round(result.wall_s, 3)}).as_dict()
 
 
-__all__ = ["AttackScenario", "AttackSceneSource", "drive_record", "read_index"]
+__all__ = ["AttackScenario", "AttackSceneSource", "drive_record"]

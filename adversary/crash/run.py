@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from adversary.crash.attack import AttackConfig, attack_records, load_models
-from adversary.crash.scene_sweep import INDEX
+from adversary.crash.scene_sweep import INDEX, read_index
 from rasterize.errors import InputError
 from riskmap.infra.atomic import atomic_write, write_json
 from riskmap.infra.parallel import run_parallel
@@ -38,11 +38,12 @@ def scenes_family(scenes_dir: Path) -> str:
     have their env's."""
     from rasterize.config import family_of_env
 
+    index = read_index(Path(scenes_dir))
     try:
-        index = json.loads((Path(scenes_dir) / INDEX).read_text())
         return index.get("family") or family_of_env(index["env_id"])
-    except (OSError, ValueError, KeyError, AttributeError):
-        raise InputError(f"--scenes {scenes_dir} holds no scene index; make one with `adversary scenes`") from None
+    except (KeyError, AttributeError):
+        raise InputError(f"--scenes {scenes_dir} holds no readable scene index ({INDEX}); make one with "
+                         "`adversary scenes`") from None
 
 
 def check_traffic_family(traffic: Path, scenes_dir: Path) -> None:
@@ -59,10 +60,7 @@ def check_traffic_family(traffic: Path, scenes_dir: Path) -> None:
 
 def scene_paths(scenes_dir: Path, count: int) -> list[Path]:
     scenes_dir = Path(scenes_dir)
-    try:
-        index = json.loads((scenes_dir / INDEX).read_text())
-    except (OSError, ValueError):
-        raise InputError(f"--scenes {scenes_dir} holds no scene index; make one with `adversary scenes`") from None
+    index = read_index(scenes_dir)
     if len(index["scenes"]) < count:
         raise InputError(f"--scenes {scenes_dir} holds {len(index['scenes'])} scenes, fewer than --count "
                          f"{count}; record more with `adversary scenes ... --resume`")

@@ -20,6 +20,7 @@ before its first index write left scene files but no index; resuming it starts a
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -178,6 +179,20 @@ class RecordingSweep:
         index["candidates"] = len(self._todo())
 
 
+def read_index(scenes_dir: Path) -> dict:
+    """The index.json of a scene directory; InputError naming it when it is missing or damaged."""
+    scenes_dir = Path(scenes_dir)
+    try:
+        index = json.loads((scenes_dir / INDEX).read_text())
+        names = index["scenes"]
+        if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+            raise ValueError("scenes is not a list of names")
+    except (OSError, ValueError, KeyError, TypeError):
+        raise InputError(f"--scenes {scenes_dir} holds no readable scene index ({INDEX}); make one with "
+                         "`adversary scenes`") from None
+    return index
+
+
 def record_scenes(sweep: SceneSweep, count: int, out: Path, resume: bool = False, progress: bool = True) -> dict:
     """Record `count` scenes of `sweep` into `out` (or go on with --resume); returns the index."""
     from adversary.crash.scenes import save_record
@@ -212,4 +227,4 @@ def record_scenes(sweep: SceneSweep, count: int, out: Path, resume: bool = False
     return index
 
 
-__all__ = ["Candidate", "EnvSweep", "RecordingSweep", "SceneSweep", "record_scenes"]
+__all__ = ["Candidate", "EnvSweep", "RecordingSweep", "SceneSweep", "read_index", "record_scenes"]
