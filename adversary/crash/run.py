@@ -27,6 +27,7 @@ from adversary.crash.attack import AttackConfig, attack_records, load_models
 from adversary.crash.scene_sweep import INDEX, read_index
 from rasterize.errors import InputError
 from riskmap.infra.atomic import atomic_write, write_json
+from riskmap.infra.formats import Format
 from riskmap.infra.parallel import run_parallel
 from riskmap.infra.rundir import claim_out_dir
 from riskmap.sim.loop.plan_checks import implausible_note, summarise_implausible
@@ -198,6 +199,18 @@ def _paragraph(text: str) -> str:
     return "\n" + text if text else ""
 
 
+def _attack_run_v1(meta: dict) -> dict:
+    """An attack run.json from before versions were kept: it left out the options at the values
+    every run had before they existed (`replan_hz` at its default, `validity_terms` off: the
+    paper's loss)."""
+    config = {"replan_hz": AttackConfig.replan_hz, "validity_terms": False, **meta.get("config", {})}
+    return {**meta, "config": config}
+
+
+# An attack run's settings (run.json); a resumed run compares them upgraded.
+ATTACK_RUN_FORMAT = Format("CRASH attack run's settings", (_attack_run_v1,))
+
+
 # Under every written table: where its columns are defined.
 TABLE_NOTE = ("Columns: valid avoidable at-fault = the failures that count, over every scene; valid, avoidable "
               "and fault classes count wins (riskmap/sim/records/failures.py; "
@@ -218,15 +231,10 @@ def run_attacks(planner_spec: str, scenes_dir: Path, count: int, config: AttackC
     load_models(Path(traffic), Path(selectors) if selectors else None)
     check_traffic_family(Path(traffic), scenes_dir)
     attacks_dir = out / "attacks"
-    settings = asdict(config)
-    if config.replan_hz == AttackConfig.replan_hz:
-        del settings["replan_hz"]      # the default: run.json as written before the option, so they resume
-    if not config.validity_terms:
-        del settings["validity_terms"]  # the paper's loss: as written before the option, so they resume
-    meta = {"planner": planner_spec, "scenes": str(scenes_dir), "count": count, "config": settings,
+    meta = {"planner": planner_spec, "scenes": str(scenes_dir), "count": count, "config": asdict(config),
             "seed": seed, "traffic_model": str(traffic), "selector_model": str(selectors) if selectors else None}
     claim_out_dir(out, holds="attacks", marker="attacks", resume=resume, settings_file="run.json",
-                  settings=meta, may_change=("count",))
+                  settings=meta, may_change=("count",), file_format=ATTACK_RUN_FORMAT)
     attacks_dir.mkdir(parents=True, exist_ok=True)
     finished = {p.stem for p in paths if (attacks_dir / f"{p.stem}.json").exists()}
     panels_dir = out / "panels"

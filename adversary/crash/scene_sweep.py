@@ -29,6 +29,7 @@ from typing import NamedTuple, Protocol
 from rasterize.errors import InputError
 from rasterize.timebase import CONTROL_HZ
 from riskmap.infra.atomic import write_json
+from riskmap.infra.formats import Format
 from riskmap.infra.provenance import provenance
 from riskmap.infra.rundir import lock_out_dir, read_settings, refuse_unless_resume
 
@@ -94,9 +95,8 @@ class EnvSweep:
     def refusal(self, index: dict) -> str | None:
         if (index["env_id"], index["seed"], index["t0_s"]) != (self.env_id, self.seed, self.t0_s):
             return f"holds scenes of {index['env_id']} seed {index['seed']}; choose another --out"
-        # An index from before static vehicles existed holds scenes without any.
-        if index.get("static_agents", 0) != self.static_agents:
-            return (f"holds scenes with --static-agents {index.get('static_agents', 0)}, not {self.static_agents}; "
+        if index["static_agents"] != self.static_agents:
+            return (f"holds scenes with --static-agents {index['static_agents']}, not {self.static_agents}; "
                     "resume with the same --static-agents or choose another --out")
         return None
 
@@ -179,8 +179,19 @@ class RecordingSweep:
         index["candidates"] = len(self._todo())
 
 
+def _index_v1(index: dict) -> dict:
+    """A scene index from before versions were kept: a highway-env sweep's index from before
+    static vehicles existed holds scenes without any."""
+    return {"static_agents": 0, **index} if "env_id" in index else dict(index)
+
+
+# A scene directory's index.json; its readers (`read_index`, a resumed `record_scenes`) upgrade it.
+SCENE_INDEX_FORMAT = Format("scene index", (_index_v1,))
+
+
 def read_index(scenes_dir: Path) -> dict:
-    """The index.json of a scene directory; InputError naming it when it is missing or damaged."""
+    """The index.json of a scene directory in today's layout (`SCENE_INDEX_FORMAT`); InputError
+    naming it when it is missing or damaged."""
     scenes_dir = Path(scenes_dir)
     try:
         index = json.loads((scenes_dir / INDEX).read_text())
@@ -190,7 +201,7 @@ def read_index(scenes_dir: Path) -> dict:
     except (OSError, ValueError, KeyError, TypeError):
         raise InputError(f"--scenes {scenes_dir} holds no readable scene index ({INDEX}); make one with "
                          "`adversary scenes`") from None
-    return index
+    return SCENE_INDEX_FORMAT.read(index, where=scenes_dir / INDEX)
 
 
 def record_scenes(sweep: SceneSweep, count: int, out: Path, resume: bool = False, progress: bool = True) -> dict:
@@ -201,12 +212,13 @@ def record_scenes(sweep: SceneSweep, count: int, out: Path, resume: bool = False
     index_path = out / INDEX
     sweep.check()
     refuse_unless_resume(out, "scenes", None, resume)
-    index = read_settings(index_path) if resume and index_path.exists() else None
+    index = (SCENE_INDEX_FORMAT.read(read_settings(index_path), where=index_path)
+             if resume and index_path.exists() else None)
     why = None if index is None else sweep.refusal(index)
     if why:
         raise InputError(f"--out {out} {why}")
     lock_out_dir(out)   # one writer (creates it); removes the temporary files a killed writer left
-    index = sweep.new_index() if index is None else index
+    index = SCENE_INDEX_FORMAT.stamp(sweep.new_index()) if index is None else index
     sweep.update(index)
     found = sweep.candidates(index[sweep.position_key])
     while len(index["scenes"]) < count:         # ask for the next candidate only while one is wanted

@@ -12,9 +12,26 @@ from safetensors.torch import load_file, save
 
 from rasterize.errors import InputError
 from riskmap.infra.atomic import atomic_write, write_json
+from riskmap.infra.formats import Format
 from riskmap.infra.provenance import provenance
 
 CHECKPOINT_KIND = "riskmap"
+
+
+def _sidecar_v1(data: dict) -> dict:
+    """Sidecars from before versions were kept: a spatial risk-map planner's `sampler` section
+    written before `timing`, `keep_gap` and `gap_prediction` existed planned uniform, without gap
+    keeping, predicting the others straight."""
+    out = dict(data)
+    if out.get("kind") == CHECKPOINT_KIND and out.get("planner") != "spacetime" \
+            and isinstance(out.get("sampler"), dict):
+        out["sampler"] = {"timing": "uniform", "keep_gap": False, "gap_prediction": "straight",
+                          **out["sampler"]}
+    return out
+
+
+# Every checkpoint's JSON sidecar, of any kind; `read_sidecar` upgrades older ones.
+SIDECAR_FORMAT = Format("checkpoint sidecar", (_sidecar_v1,))
 
 # The folder that holds the `riskmap` package: the repository in a source checkout, where the
 # shipped checkpoints/ lie beside it.
@@ -45,7 +62,7 @@ def save_checkpoint(path: Path, model: torch.nn.Module, sidecar: dict,
     path = Path(path).with_suffix(".safetensors")
     state = {k: v.detach().cpu().contiguous() for k, v in model.state_dict().items()}
     atomic_write(path, lambda f: f.write(save(state)))
-    write_json(path.with_suffix(".json"), {"kind": kind, **provenance(), **sidecar})
+    write_json(path.with_suffix(".json"), SIDECAR_FORMAT.stamp({"kind": kind, **provenance(), **sidecar}))
     return path
 
 
@@ -86,9 +103,10 @@ def kind_words(kind) -> tuple[str, str]:
 
 
 def read_sidecar(path: Path, kind: str = CHECKPOINT_KIND) -> dict:
-    """The JSON sidecar of checkpoint `path` (without suffix), which must be of `kind`; anything
-    else (missing, unreadable, of no or another kind) is an InputError naming the path. A relative
-    path not found here is looked for in the toolkit's own folder (`resolve_checkpoint`)."""
+    """The JSON sidecar of checkpoint `path` (without suffix), which must be of `kind`, in today's
+    layout (`SIDECAR_FORMAT` upgrades older ones); anything else (missing, unreadable, of no or
+    another kind, of a newer format) is an InputError naming the path. A relative path not found
+    here is looked for in the toolkit's own folder (`resolve_checkpoint`)."""
     path = resolve_checkpoint(path)
     weights = path.with_suffix(".safetensors")
     sidecar = path.with_suffix(".json")
@@ -109,7 +127,7 @@ def read_sidecar(path: Path, kind: str = CHECKPOINT_KIND) -> dict:
         theirs = kind_words(data["kind"])[0]
         raise InputError(f"checkpoint {path} is a {theirs} checkpoint (kind {data['kind']!r}), not "
                          f"a {what} one; {fix}")
-    return data
+    return SIDECAR_FORMAT.read(data, where=sidecar)
 
 
 def load_tensors(path: Path) -> dict[str, torch.Tensor]:

@@ -20,6 +20,7 @@ from pathlib import Path
 
 from rasterize.errors import InputError
 from riskmap.infra.atomic import write_json
+from riskmap.infra.formats import VERSION_KEY, Format
 from riskmap.infra.provenance import provenance
 
 
@@ -84,15 +85,19 @@ def refuse_if_locked(out: Path) -> None:
 
 
 def check_same_settings(out: Path, settings_file: str, settings: dict,
-                        may_change: tuple[str, ...] = (), differs: str = "other settings") -> dict | None:
-    """The settings an earlier run wrote to `out/settings_file` (None if none); InputError if they
-    differ from `settings` outside `may_change`."""
+                        may_change: tuple[str, ...] = (), differs: str = "other settings",
+                        file_format: Format | None = None) -> dict | None:
+    """The settings an earlier run wrote to `out/settings_file` (None if none; upgraded by
+    `file_format` when the file is versioned); InputError if they differ from `settings` outside
+    `may_change`."""
     path = Path(out) / settings_file
     if not path.exists():
         return None
     previous = read_settings(path)
-    mine = _without(settings, may_change)
-    theirs = _without(previous, may_change + tuple(provenance()))
+    if file_format is not None:
+        previous = file_format.read(previous, where=path)
+    mine = _without(settings, may_change + (VERSION_KEY,))
+    theirs = _without(previous, may_change + tuple(provenance()) + (VERSION_KEY,))
     if theirs != mine:
         raise InputError(f"--out {out} was made with {differs}; resume with the same settings or "
                          "choose another --out")
@@ -128,12 +133,15 @@ def lock_out_dir(out: Path) -> None:
 
 
 def claim_out_dir(out: Path, *, holds: str, marker: str | None, resume: bool, settings_file: str,
-                  settings: dict, may_change: tuple[str, ...] = (), differs: str = "other settings"
-                  ) -> dict | None:
-    """Apply the rule of the module docstring, then write `settings` (with provenance) to
-    `out/settings_file`; returns the previous settings, or None for a fresh run."""
+                  settings: dict, may_change: tuple[str, ...] = (), differs: str = "other settings",
+                  file_format: Format | None = None) -> dict | None:
+    """Apply the rule of the module docstring, then write `settings` (with provenance, and
+    stamped with `file_format`'s version when given) to `out/settings_file`; returns the previous
+    settings (upgraded by `file_format`), or None for a fresh run."""
     refuse_unless_resume(out, holds, marker, resume)
-    previous = check_same_settings(out, settings_file, settings, may_change, differs) if resume else None
+    previous = (check_same_settings(out, settings_file, settings, may_change, differs, file_format)
+                if resume else None)
     lock_out_dir(out)
-    write_json(Path(out) / settings_file, {**settings, **provenance()})
+    written = {**settings, **provenance()}
+    write_json(Path(out) / settings_file, file_format.stamp(written) if file_format else written)
     return previous

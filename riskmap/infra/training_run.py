@@ -19,10 +19,10 @@ guard train`, `adversary train-traffic`, `adversary train-selector --objective u
 - The best epoch: by a metric of the log rows that the trainer names (lower is better unless
   `higher`); it is the row of that epoch.
 
-States written by earlier versions still resume: their keys are read in every spelling used
-before (`SPELLINGS`: "optimiser" for "optimizer", ...), a best written as the metric's value or
-as {value, epoch} is taken as the log row of its epoch, and a state without an epoch is at the
-last epoch of its log. A `riskmap train` run begun before state.pt resumes from its last
+States written by earlier versions still resume: `STATE_FORMAT` reads their keys in every
+spelling used before (`SPELLINGS`: "optimiser" for "optimizer", ...) and puts a state without
+an epoch at the last epoch of its log; a best written as the metric's value or as {value,
+epoch} is taken as the log row of its epoch (`TrainingRun`, which knows the metric). A `riskmap train` run begun before state.pt resumes from its last
 checkpoint (`read_checkpoint_run`).
 
     run = TrainingRun(out, resume, metric="val_ade_m", settings=to_plain(config))
@@ -56,6 +56,7 @@ from riskmap.infra.checkpoint import (
     save_checkpoint,
     save_state,
 )
+from riskmap.infra.formats import Format
 from riskmap.infra.rundir import lock_out_dir, refuse_unless_resume
 
 STATE = "state.pt"
@@ -132,15 +133,23 @@ def read_checkpoint_run(out: Path, kind: str) -> dict | None:
             "optimizer": torch.load(out / "last_optimizer.pt", weights_only=True)}
 
 
-def _spelled(state: dict) -> dict:
-    """`state` with its keys in today's spelling (`SPELLINGS`)."""
+def _state_v1(state: dict) -> dict:
+    """A resume state from before versions were kept: its keys in today's spelling
+    (`SPELLINGS`), an empty log where it held none, and the epoch of its last log row where it
+    named no epoch."""
     state = dict(state)
     for key, spellings in SPELLINGS.items():
         for spelling in spellings:
             if spelling in state:
                 value = state.pop(spelling)
                 state.setdefault(key, value)
+    state.setdefault("log", [])
+    state.setdefault("epoch", len(state["log"]) - 1)
     return state
+
+
+# A training run's resume state (state.pt); `TrainingRun.resume_from` upgrades older ones.
+STATE_FORMAT = Format("training resume state", (_state_v1,))
 
 
 # ------------------------------------------------------------------------------ the run
@@ -255,9 +264,7 @@ class TrainingRun:
             state = self.older() if self.older is not None else None
         if state is None:
             return None
-        state = _spelled(state)
-        state.setdefault("log", [])
-        state.setdefault("epoch", len(state["log"]) - 1)
+        state = STATE_FORMAT.read(state, where=self.path)
         saved = state.get("settings")
         if saved is not None and not self._same_settings(saved):
             raise InputError(f"--out {self.out} was trained with other settings; {self.fix}")
@@ -304,7 +311,7 @@ class TrainingRun:
             state["rng"] = torch.get_rng_state()
         if self.settings is not None:
             state["settings"] = self.settings
-        save_state(self.path, {**state, **(extra or {})})
+        save_state(self.path, STATE_FORMAT.stamp({**state, **(extra or {})}))
         self.publish(model)
         return improved
 

@@ -12,7 +12,8 @@ vehicle's speed along the path. Distances are then made to respect every later c
 once held back, advance no faster than the plan did.
 
 This is our addition to the planner paper's sampler (it has no notion of time along the path);
-`SamplerConfig.keep_gap` switches it, and checkpoints from before it existed plan without.
+`SamplerConfig.keep_gap` switches it, and checkpoints from before it existed plan without (their
+sidecars are upgraded so: `riskmap.infra.checkpoint`).
 
 Shapes: waypoints [K, 2] ego frame (x forward, y left), metres, at `dt_s` steps.
 """

@@ -34,11 +34,10 @@ PLANNING_SECTIONS = {"grid": (), "irl": ("goal_variance", "horizon", "gamma"), "
 
 
 def sampler_of(side: dict) -> SamplerConfig:
-    """A checkpoint's sampler: as trained (sidecars from before `timing` and `keep_gap` existed:
-    uniform, no gap keeping; before `gap_prediction`: straight), with a planning-time `timing`,
-    `keep_gap` or `gap_prediction` from the sidecar's `planning` section over it."""
-    settings = {"timing": "uniform", "keep_gap": False, "gap_prediction": "straight",
-                **side["sampler"]}
+    """A checkpoint's sampler: as trained (older sidecars' defaults are filled in by
+    `riskmap.infra.checkpoint.SIDECAR_FORMAT`), with a planning-time `timing`, `keep_gap` or
+    `gap_prediction` from the sidecar's `planning` section over it."""
+    settings = dict(side["sampler"])
     for key in ("timing", "keep_gap", "gap_prediction"):
         if key in side.get("planning", {}):
             settings[key] = side["planning"][key]

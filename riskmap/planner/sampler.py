@@ -29,7 +29,7 @@ class SamplerConfig:
     (at most `max_accel_mps2`; where that would mean reversing, braking to a stop at its end):
     `kinematic_arc_lengths`; `learned`: the arc lengths the network's timing head predicts
     (`riskmap.planner.model.TimingHead`), never beyond the path's end. Checkpoints from before
-    `timing` existed plan `uniform`."""
+    `timing` existed plan `uniform` (their sidecars are upgraded so: `riskmap.infra.checkpoint`)."""
 
     samples: int = 1000
     clusters: int = 10

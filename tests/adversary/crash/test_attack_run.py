@@ -82,7 +82,7 @@ def test_summary_counts_every_scene_in_the_denominator():
     assert "1/2 (50.0" in table_row("x", s)
 
 
-def test_replan_hz_reaches_every_drive_and_the_default_keeps_old_run_json(scenes, tmp_path, monkeypatch):
+def test_replan_hz_reaches_every_drive_and_old_run_json_resumes(scenes, tmp_path, monkeypatch):
     from adversary.crash import judge
     from adversary.crash.attack import replan_hz_of
 
@@ -100,9 +100,14 @@ def test_replan_hz_reaches_every_drive_and_the_default_keeps_old_run_json(scenes
     record = json.loads((tmp_path / "fast" / "attacks" / "scene_00001.json").read_text())
     assert replan_hz_of(record) == 10 and replan_hz_of({"config": {}}) == 2
     assert json.loads((tmp_path / "fast" / "run.json").read_text())["config"]["replan_hz"] == 10
-    run_attacks("idm", scenes, 1, AttackConfig(selector="distance", iterations_closed_loop=4),
-                0, tmp_path / "default", TRAFFIC, None, progress=False)
-    assert "replan_hz" not in json.loads((tmp_path / "default" / "run.json").read_text())["config"]
+    default = AttackConfig(selector="distance", iterations_closed_loop=4, validity_terms=False)
+    run_attacks("idm", scenes, 1, default, 0, tmp_path / "default", TRAFFIC, None, progress=False)
+    # A run.json from before the options (no version, neither key) resumes: its reader upgrades it.
+    meta = json.loads((tmp_path / "default" / "run.json").read_text())
+    del meta["format_version"], meta["config"]["replan_hz"], meta["config"]["validity_terms"]
+    (tmp_path / "default" / "run.json").write_text(json.dumps(meta))
+    run_attacks("idm", scenes, 1, default, 0, tmp_path / "default", TRAFFIC, None, progress=False, resume=True)
+    assert json.loads((tmp_path / "default" / "run.json").read_text())["config"]["replan_hz"] == 2
     with pytest.raises(InputError, match="must divide the 10 Hz"):
         AttackConfig(replan_hz=3)
 

@@ -241,11 +241,12 @@ def test_report_shows_rounds_and_the_same_window_before_and_after(natural_and_wi
 def test_the_round_planner_samples_and_plans_as_the_original():
     """Only the weights may differ between a round's planner and the one it came from: an original
     from before kinematic timing and gap keeping must not gain them from the fine-tune's sidecar."""
+    from riskmap.infra.checkpoint import SIDECAR_FORMAT
     from riskmap.planner.riskmap_planner import sampler_of
     from riskmap.planner.sampler import SamplerConfig
 
-    original = {"sampler": {"samples": 1000, "clusters": 10, "waypoints": 12}, "planning": {"goal_variance": 2.0},
-                "irl": {"goal_variance": 5.0}}
+    original = SIDECAR_FORMAT.read({"kind": "riskmap", "planning": {"goal_variance": 2.0}, "irl": {"goal_variance": 5.0},
+                                    "sampler": {"samples": 1000, "clusters": 10, "waypoints": 12}})
     trained = {"sampler": {**SamplerConfig().__dict__}, "irl": {"goal_variance": 5.0}, "epoch": 2}
     assert sampler_of(trained) != sampler_of(original)          # the case the rule is for
     side = round_sidecar(trained, original, {"round": 1})

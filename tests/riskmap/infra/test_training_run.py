@@ -9,7 +9,7 @@ import torch
 
 from rasterize.errors import InputError
 from riskmap.infra.checkpoint import load_state, save_state
-from riskmap.infra.training_run import STATE, TrainingRun, csv_log
+from riskmap.infra.training_run import STATE, STATE_FORMAT, TrainingRun, csv_log
 
 # Validation values per epoch: epoch 1 improves on 0, 2 does not, 3 does.
 VALS = [3.0, 1.0, 2.0, 0.5]
@@ -88,7 +88,8 @@ def test_a_run_killed_between_commit_and_its_files_resumes_to_the_uninterrupted_
 def test_the_state_holds_what_resume_needs_in_one_spelling(tmp_path):
     _fit(tmp_path / "run", epochs=2)
     state = load_state(tmp_path / "run" / STATE)
-    assert set(state) == {"model", "optimizer", "epoch", "best", "log", "rng", "settings"}
+    assert set(state) == {"model", "optimizer", "epoch", "best", "log", "rng", "settings", "format_version"}
+    assert state["format_version"] == STATE_FORMAT.version
     assert state["epoch"] == 1 and state["best"] == state["log"][1] and state["settings"]["epochs"] == 2
 
 
