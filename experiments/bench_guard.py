@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from rasterize.tracks import Tracks
 from riskmap.guard.events import nearest_neighbours
 from riskmap.guard.guarded import GUARD_CHECKPOINT, GuardConfig, obstacle_ahead, system2_config
 from riskmap.guard.predictor import AccidentPredictor
@@ -69,8 +70,7 @@ def main() -> None:
             for scene in tap.scenes:
                 t0 = time.perf_counter()
                 neighbours = nearest_neighbours(scene, config.neighbours)
-                scores, ttcs = predictor.score(scene.states, scene.valid, scene.sizes, scene.kinds,
-                                               scene.ego_index, neighbours, scene.current_index, 1)
+                scores, ttcs = predictor.score(Tracks.of_scene(scene), scene.ego_index, neighbours, scene.current_index, 1)
                 alert = bool(len(scores) and scores.max() >= predictor.alert_threshold)
                 ttc = float(ttcs[scores.argmax()]) if alert else None
                 ahead = obstacle_ahead(scene, config.obstacle_ahead_m, config.obstacle_lateral_m)

@@ -33,7 +33,8 @@ def collision_side(out: Path, spec: str, episode: int) -> dict:
                   episode_s=config.episode_s), episode, run=run)
     if not run.crashed:
         return {"episode": episode, "collided": False}
-    states, valid, sizes, _ = run.recorder.arrays()
+    tracks = run.recorder.tracks()
+    states, valid, sizes = tracks.states, tracks.valid, tracks.sizes
     ego_id, k = run.recorder.ego_id, run.steps
     ego = states[ego_id, k]
     others = [a for a in range(len(sizes)) if a != ego_id and valid[a, k]]

@@ -55,7 +55,8 @@ def simulator_limits(episodes: int) -> dict:
         driven = {}
         drive_episode(env, make_planner("idm", seed=0), DriveConfig("highway-v0", episodes, seed=3000, episode_s=30.0),
                       episode, hooks=DriveHooks(on_step=lambda run: driven.update(run=run)))
-        states, valid, sizes, _ = driven["run"].recorder.arrays()
+        tracks = driven["run"].recorder.tracks()
+        states, valid, sizes = tracks.states, tracks.valid, tracks.sizes
         for agent in range(states.shape[0]):
             track = states[agent][valid[agent]]
             if len(track) < 20 or sizes[agent, 0] < 3.0:       # vehicles seen for 2 s or more

@@ -13,12 +13,13 @@ from rasterize.maps import (
 )
 from rasterize.raster import CHANNELS, rasterize_scene
 from rasterize.scene import AgentKind, Lane, LineType, Scene, Signal
+from rasterize.tracks import Tracks
 
 __version__ = "0.1.0"
 
 __all__ = [
     "AgentKind", "CHANNELS", "ENV_FAMILIES", "Extent", "FAMILY_EXTENTS", "GridConfig",
-    "InputError", "Lane", "LineType", "RasterConfig", "Scene", "Signal", "demo_goal_cell",
+    "InputError", "Lane", "LineType", "RasterConfig", "Scene", "Signal", "Tracks", "demo_goal_cell",
     "demo_visitation", "family_of_env", "goal_map", "motion_features", "raster_config_for_env",
     "rasterize_scene", "scene_from_commonroad", "scene_from_highway_env", "start_cell", "uncertainty_map",
 ]

@@ -18,6 +18,7 @@ from rasterize.errors import InputError
 from rasterize.frames import heading_from_highway_env, world_from_highway_env
 from rasterize.scene import STATE_DIM, AgentKind, Lane, LineType, Scene
 from rasterize.timebase import FUTURE_S, HISTORY_S, PLAN_DT_S
+from rasterize.tracks import Tracks
 
 
 @dataclass(frozen=True)
@@ -378,9 +379,9 @@ class TrafficRecorder:
         """The most recently recorded state [6] of `agent` (no rebuild of the whole record)."""
         return self._latest[agent]
 
-    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """(states [A, S, 6], valid [A, S], sizes [A, 2], kinds [A]) of the whole record: one row per
-        recorded agent (a vehicle that took over an agent's recording, `adopt`, adds none)."""
+    def tracks(self) -> Tracks:
+        """The whole record as `Tracks` (states, valid, sizes, kinds; no ids): one row per recorded
+        agent, its recorder id (a vehicle that took over an agent's recording, `adopt`, adds none)."""
         if self._cache is None:
             n_agents, n_steps = len(self._sizes), self.num_steps
             states = np.zeros((n_agents, n_steps, STATE_DIM))
@@ -388,8 +389,8 @@ class TrafficRecorder:
             for step, agent, state in self._rows:
                 states[agent, step] = state
                 valid[agent, step] = True
-            self._cache = (states, valid, np.asarray(self._sizes).reshape(-1, 2),
-                           np.asarray(self._kinds, dtype=np.int8))
+            self._cache = Tracks(states, valid, np.asarray(self._sizes).reshape(-1, 2),
+                                 np.asarray(self._kinds, dtype=np.int8))
         return self._cache
 
     def scene(self, step: int, history_s: float = HISTORY_S, future_s: float = FUTURE_S,
@@ -406,7 +407,8 @@ class TrafficRecorder:
         if not 0 <= step < self.num_steps:
             raise InputError(f"scene step {step} is outside the record (0..{self.num_steps - 1})")
         n_hist, n_fut = int(round(history_s / dt_s)), int(round(future_s / dt_s))
-        states, valid, sizes, kinds = self.arrays()
+        tracks = self.tracks()
+        states, valid, sizes, kinds = tracks.states, tracks.valid, tracks.sizes, tracks.kinds
         ego = self.ego_id
         if not valid[ego, step]:
             raise InputError(f"the ego is not on the road at recorded step {step}")

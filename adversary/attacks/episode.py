@@ -165,9 +165,9 @@ def record_of(episode: dict, monitor: EpisodeMonitor, extra: dict, planner=None)
 
     solution = failure = None
     if episode["collided"] and monitor.collision_step is not None:
-        states, valid, sizes, _ = monitor.run.recorder.arrays()
-        ego = monitor.run.recorder.ego_id
-        solution = ego_only_solution(states, valid, sizes, ego, monitor.collision_step, monitor.run.dt)
+        recorder = monitor.run.recorder
+        solution = ego_only_solution(recorder.tracks(), recorder.ego_id, monitor.collision_step,
+                                     monitor.run.dt)
         partner = monitor.collision.get("partner_id")
         failure = None if partner is None else classify_run(
             monitor.run, monitor.attack.adversary, (monitor.collision_step, partner), monitor.adversary_off_road)

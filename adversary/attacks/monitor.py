@@ -83,7 +83,7 @@ class EpisodeMonitor:
         self.collision_step = step
         self.collision = {
             "partner_is_adversary": partner is self.attack.adversary,
-            "partner_id": self.run.recorder.known_id(partner),      # its row in the recorder's arrays
+            "partner_id": self.run.recorder.known_id(partner),      # its row in the recorder's tracks
             "kinematic_mps": float(np.linalg.norm(ego.velocity - partner.velocity)),
             "type": collision_type(ego, partner),
             "time_s": step * self.run.dt,

@@ -251,7 +251,7 @@ def natural_record(result, scene: RecordedScene, safety, driver: str | None = No
         collision = {"collision_type": coarse_collision_type(ego_v, other_v),
                      "collision_time_s": float(contact["time_s"]),
                      "kinematic_mps": float(np.linalg.norm(ego_v.velocity - other_v.velocity))}
-        solution = ego_only_solution(result.states, result.valid, result.sizes, result.ego, step, result.dt_s)
+        solution = ego_only_solution(result.tracks, result.ego, step, result.dt_s)
         failure = classify_recorded_collision(result, partner, step, lanes)
     dangerous, encounters = _encounters(result, step, safety, max(1, round(0.5 / result.dt_s)))
     return job_fields(replace(drive, planner="", extra={
@@ -272,8 +272,8 @@ def classify_recorded_collision(result, partner: int, step: int, lanes=()) -> di
     attack to validate); with `lanes`, lane changes that keep the box on them count too."""
     from riskmap.sim.records.failures import classify_failure, road_rules
 
-    return classify_failure(result.states, result.valid, result.sizes, result.ego, partner, step, result.dt_s,
-                            **road_rules(lanes), from_step=result.t0_step)
+    return classify_failure(result.tracks, result.ego, partner, step, result.dt_s, **road_rules(lanes),
+                            from_step=result.t0_step)
 
 
 def natural_recorded_job(job) -> tuple[dict, bytes]:

@@ -28,6 +28,7 @@ import numpy as np
 
 from adversary.crash.scene_sweep import read_index
 from rasterize.errors import InputError
+from rasterize.tracks import Tracks
 
 KIND = "attack_scenes"
 MODE = "log"           # the other vehicles always replay the scene's log; no attack is spliced in
@@ -185,13 +186,14 @@ def drive_record(record, result, spec: str, name: str, start: int) -> dict:
     log, ego, dt = record.log, result.ego, result.dt_s
     end = record.t0_step + record.stride * record.scene.future_steps + 1      # the rollout's log span
     human = log.states[log.ego_id, start:end][log.valid[log.ego_id, start:end]]
-    states, valid = result.states[:, start:], result.valid[:, start:]
-    metrics = trajectory_metrics(states, valid, result.sizes, ego, dt, human[:, :2], SafetyConfig())
-    others = [a for a in range(len(result.sizes)) if a != ego]
-    step, partner, iou = first_collision(result.states, result.valid, result.sizes, ego, others, start)
+    tracks = result.tracks
+    handed_over = Tracks(tracks.states[:, start:], tracks.valid[:, start:], tracks.sizes, tracks.kinds)
+    metrics = trajectory_metrics(handed_over, ego, dt, human[:, :2], SafetyConfig())
+    others = [a for a in range(tracks.num_agents) if a != ego]
+    step, partner, iou = first_collision(tracks, ego, others, start)
     failure = None
     if step is not None:
-        failure = classify_failure(result.states, result.valid, result.sizes, ego, int(partner), step, dt,
+        failure = classify_failure(tracks, ego, int(partner), step, dt,
                                    **road_rules(record.window.lanes), from_step=start)
     drive = EpisodeRecord.from_dict(result.drive)
     scene = record.scene

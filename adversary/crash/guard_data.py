@@ -40,6 +40,7 @@ import numpy as np
 
 from rasterize.errors import InputError
 from rasterize.scene import AgentKind
+from rasterize.tracks import Tracks
 from riskmap.guard.dataset import (
     GuardCollectConfig,
     extract_windows,
@@ -137,11 +138,12 @@ def collision_step(metrics: dict, dt_s: float) -> int | None:
     return round(metrics["collision_any_time_s"] / dt_s)
 
 
-def contact_onset(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, ego: int, step: int
-                  ) -> tuple[int, int]:
+def contact_onset(tracks: Tracks, ego: int, step: int) -> tuple[int, int]:
     """(first step, partner) of the unbroken box overlap between the ego and the agent it overlaps
-    most at `step` (states [A, S, 6], valid [A, S], sizes [A, 2]), walking back from `step`."""
+    most at `step` in `tracks`, walking back from `step`."""
     from adversary.crash.judge import box_iou
+
+    states, valid, sizes = tracks.states, tracks.valid, tracks.sizes
 
     def iou(agent: int, k: int) -> float:
         if not (valid[agent, k] and valid[ego, k]):
@@ -181,11 +183,11 @@ def rollout_windows(record, attack: dict, planner, config: GuardCollectConfig, r
     judged = collision_step(metrics, result.dt_s)
     cut = judged
     if judged is not None and cut_at == "contact":
-        cut, _ = contact_onset(result.states, result.valid, result.sizes, result.ego, judged)
+        cut, _ = contact_onset(result.tracks, result.ego, judged)
     end = result.states.shape[1] if cut is None else cut + 1
-    states, valid = result.states[:, :end], result.valid[:, :end]
     kinds = recorder_kinds(record.log.kinds, result.log_ids)
-    windows = extract_windows(states, valid, result.sizes, kinds, result.ego, cut is not None, config, rng)
+    cut_tracks = Tracks(result.states[:, :end], result.valid[:, :end], result.sizes, kinds)
+    windows = extract_windows(cut_tracks, result.ego, cut is not None, config, rng)
     partners = sorted({int(i) for i in windows["neighbour"][np.isfinite(windows["ttc_s"])]})
     meta.update({"collided": cut is not None, "cut_step": cut, "judged_step": judged, "cut_at": cut_at,
                  "first_collision_is_adversary": cut is not None and metrics["collision"]

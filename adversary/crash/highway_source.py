@@ -12,6 +12,7 @@ from dataclasses import dataclass
 
 from adversary.crash.scenes import WINDOW_DT_S, AttackScene, SceneRecord, record_attack_scene
 from rasterize.timebase import FUTURE_S, HISTORY_S
+from rasterize.tracks import Tracks
 from riskmap.sim.records.failures import HIGHWAY_ENV_LIMITS
 from riskmap.sim.worlds.log_replay import HumanLog
 
@@ -38,9 +39,10 @@ class HighwayWorld:
 
         return episode_record(self.run, self.driver, loop_record, self.episode)
 
-    def arrays(self):
-        states, valid, sizes, _ = self.run.recorder.arrays()
-        return states.copy(), valid.copy(), sizes.copy(), self.run.recorder.ego_id, self.run.log_ids()
+    def tracks(self) -> tuple[Tracks, int]:
+        tracks = self.run.recorder.tracks()
+        return (Tracks(tracks.states.copy(), tracks.valid.copy(), tracks.sizes.copy(), tracks.kinds.copy(),
+                       self.run.log_ids()), self.run.recorder.ego_id)
 
     def final_scene(self):
         recorder = self.run.recorder

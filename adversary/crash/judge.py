@@ -27,6 +27,7 @@ from adversary.crash.scenes import CONTROL_HZ, WINDOW_DT_S, SceneRecord
 from rasterize.errors import InputError
 from rasterize.frames import box_corners
 from rasterize.timebase import FUTURE_S, HISTORY_S, REPLAN_HZ
+from rasterize.tracks import ReadsTracks, Tracks
 from riskmap.registry import cached_planner
 from riskmap.sim.records.alternatives import ego_only_solution
 from riskmap.sim.records.failures import classify_failure
@@ -113,19 +114,17 @@ def splice_tracks(record: SceneRecord, tracks: np.ndarray, rows) -> HumanLog:
 
 
 @dataclass(frozen=True, eq=False)
-class Rollout:
+class Rollout(ReadsTracks):
     """One closed-loop drive of the spliced log.
 
-    states [A, S, 6], valid [A, S], sizes [A, 2]: every vehicle's recorded 10 Hz states (recorder
-    ids; S = (t0 + horizon) * 10 + 1 unless the ego left the road earlier); ego: the ego's recorder
-    id; log_ids [A]: the log agent each recorder agent replays (the ego: the log's ego; -1 none).
+    tracks: every vehicle's recorded 10 Hz `Tracks` (rows: recorder ids; S = (t0 + horizon) * 10 + 1
+    unless the ego left the road earlier; ids: the log agent each recorder agent replays, the ego:
+    the log's ego, -1 none); ego: the ego's recorder id. `states`, `valid`, `sizes` and `log_ids`
+    read the tracks' (`ReadsTracks`).
     """
 
-    states: np.ndarray
-    valid: np.ndarray
-    sizes: np.ndarray
+    tracks: Tracks
     ego: int
-    log_ids: np.ndarray
     dt_s: float
     t0_step: int
     planner_spec: str
@@ -183,10 +182,10 @@ def rollout(record: SceneRecord, tracks: np.ndarray, rows, planner, planner_spec
         log = with_ego_states(log, ego_states)
     world = scene_source(record.scene).world(record, log, planner, planner_spec, control_hz, replan_hz)
     drive = world.record(drive_world(world.run, world.driver, world.loop, world.hooks))
-    states, valid, sizes, ego, log_ids = world.arrays()
+    tracks, ego = world.tracks()
     final_scene = world.final_scene() if keep_scene else None
     windows = tuple(world.window(k) for k in scene_steps)
-    return Rollout(states, valid, sizes, ego, log_ids, log.dt_s, record.t0_step, planner_spec, drive,
+    return Rollout(tracks, ego, log.dt_s, record.t0_step, planner_spec, drive,
                    time.perf_counter() - started, final_scene, windows)
 
 
@@ -237,11 +236,12 @@ def braking_track(record: SceneRecord, row: int, decel_mps2: float = 8.0, into_e
 
 # ---- metrics --------------------------------------------------------------------------------
 
-def first_collision(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, ego: int,
-                    others: list[int], from_step: int = 0) -> tuple[int | None, int | None, float]:
+def first_collision(tracks: Tracks, ego: int, others: list[int], from_step: int = 0
+                    ) -> tuple[int | None, int | None, float]:
     """(step, agent, IoU) of the first step >= from_step at which the ego's box overlaps one of
-    `others` with IoU > COLLISION_IOU; (None, None, max IoU seen) if never. Arrays as a
-    `Rollout`'s: states [N, S, 6], valid [N, S], sizes [N, 2]."""
+    `others` with IoU > COLLISION_IOU; (None, None, max IoU seen) if never. `tracks` as a
+    `Rollout`'s."""
+    states, valid, sizes = tracks.states, tracks.valid, tracks.sizes
     reach = 0.5 * (np.hypot(*sizes[ego]) + np.hypot(sizes[:, 0], sizes[:, 1]))
     best = 0.0
     for k in range(from_step, states.shape[1]):
@@ -262,8 +262,8 @@ def first_collision(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, eg
 
 def _first_collision(result: Rollout, ego: int, others: list[int], from_step: int
                      ) -> tuple[int | None, int | None, float]:
-    """`first_collision` on a rollout's recorded arrays."""
-    return first_collision(result.states, result.valid, result.sizes, ego, others, from_step)
+    """`first_collision` on a rollout's recorded tracks."""
+    return first_collision(result.tracks, ego, others, from_step)
 
 
 def collided_with(result: Rollout, record: SceneRecord, row: int) -> bool:
@@ -405,7 +405,7 @@ def judge(record: SceneRecord, tracks: np.ndarray, rows, adversary_row: int, pla
         both = result.valid[ego, lo:k_coll + 1] & result.valid[adv, lo:k_coll + 1]
         metrics["collision_type"] = classify_collision(s[ego, lo:k_coll + 1][both], s[adv, lo:k_coll + 1][both],
                                                        result.sizes[ego], result.sizes[adv])
-        longitudinal = ego_only_solution(s, result.valid, result.sizes, ego, k_coll, dt)
+        longitudinal = ego_only_solution(result.tracks, ego, k_coll, dt)
 
         def on_road(centre, heading, length, width):
             state = np.array([*centre, *heading])
@@ -413,14 +413,14 @@ def judge(record: SceneRecord, tracks: np.ndarray, rows, adversary_row: int, pla
 
         metrics["solution_found_longitudinal"] = bool(longitudinal)
         metrics["solution_found"] = bool(longitudinal) or bool(ego_only_solution(
-            s, result.valid, result.sizes, ego, k_coll, dt, accels_mps2=SOLUTION_LATERAL_ACCELS_MPS2,
+            result.tracks, ego, k_coll, dt, accels_mps2=SOLUTION_LATERAL_ACCELS_MPS2,
             lateral_offsets_m=(lane_m, -lane_m), on_road=on_road))
-        metrics["failure"] = classify_failure(s, result.valid, result.sizes, ego, adv, k_coll, dt, attack=True,
+        metrics["failure"] = classify_failure(result.tracks, ego, adv, k_coll, dt, attack=True,
                                               on_road=on_road, lane_width_m=lane_m,
                                               adversary_off_road=adv_frac > OFF_ROAD_FRACTION, from_step=k0,
                                               limits=scene_source(record.scene).limits)
     elif k_any is not None and with_any is not None:       # the ego hit someone else: a failure too
-        metrics["failure"] = classify_failure(result.states, result.valid, result.sizes, ego, int(with_any), k_any,
+        metrics["failure"] = classify_failure(result.tracks, ego, int(with_any), k_any,
                                               dt, lane_width_m=lane_m, from_step=k0)
     path = result.states[ego, k0:end + 1, :2][result.valid[ego, k0:end + 1]]
     metrics["distance_m"] = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())

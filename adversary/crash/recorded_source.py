@@ -31,6 +31,7 @@ from rasterize.commonroad.tracks import RecordedTraffic
 from rasterize.errors import InputError
 from rasterize.frames import highway_env_from_world
 from rasterize.scene import Scene
+from rasterize.tracks import Tracks
 from riskmap.sim.records.failures import CAR_LIMITS
 from riskmap.sim.records.metrics import centre_off_lane
 from riskmap.sim.worlds.commonroad_replay import CommonRoadWorld, ReplayConfig
@@ -169,10 +170,10 @@ class RecordedWorld:
             self._arrays = (states, valid)
         return self._arrays
 
-    def arrays(self):
+    def tracks(self) -> tuple[Tracks, int]:
         states, valid = self._drove()
-        return (states, valid, self.log.sizes.copy(), self.log.ego_id,
-                np.arange(len(self.log.sizes), dtype=np.int64))
+        return (Tracks(states, valid, self.log.sizes.copy(), self.log.kinds.copy(),
+                       np.arange(len(self.log.sizes), dtype=np.int64)), self.log.ego_id)
 
     def final_scene(self) -> Scene:
         states, valid = self._drove()

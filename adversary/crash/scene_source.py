@@ -21,9 +21,8 @@ from __future__ import annotations
 
 from typing import Protocol
 
-import numpy as np
-
 from adversary.crash.scenes import AttackScene, SceneRecord
+from rasterize.tracks import Tracks
 from riskmap.sim.worlds.log_replay import HumanLog
 
 
@@ -38,8 +37,8 @@ class SceneWorld(Protocol):
     def record(self, loop_record) -> dict:
         """The drive's record (`Rollout.drive`) from drive_world's `LoopRecord`."""
 
-    def arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, int, np.ndarray]:
-        """(states [A, S, 6], valid [A, S], sizes [A, 2], ego, log_ids [A]) as `Rollout` holds them."""
+    def tracks(self) -> tuple[Tracks, int]:
+        """(tracks with ids: the log agent each row replays, ego) as `Rollout` holds them."""
 
     def final_scene(self):
         """The last step with the whole drive as history, at the control rate (`keep_scene`)."""

@@ -53,6 +53,7 @@ import numpy as np
 # LANE_EXTENSION_M (`rasterize.commonroad.lanelets`, the one builder)
 from rasterize.commonroad.lanelets import LANE_EXTENSION_M, LANELET_ID_OFFSET
 from rasterize.errors import InputError
+from rasterize.tracks import ReadsTracks, Tracks
 
 FORMATS = ("commonroad",)
 DECIMALS = 8                    # decimal places written (commonroad-io's writer truncates there)
@@ -66,21 +67,17 @@ TRAJECTORY_COLUMNS = ("time_step", "x", "y", "orientation", "velocity", "yaw_rat
 # ---- the attacked run --------------------------------------------------------------------------
 
 @dataclass(frozen=True, eq=False)
-class AttackedRun:
+class AttackedRun(ReadsTracks):
     """The attacked run of one record, on the log's steps 0 .. last_step (module docstring).
 
-    states [A, S, 6] (x, y, heading_x, heading_y, speed, yaw_rate), valid [A, S], sizes [A, 2]
-    (length, width), kinds [A]: every log agent, the ego (`ego`) as it drove, the spliced rows
-    as generated; adversary: the adversary's log agent; spliced: the log agents that follow
-    generated tracks; t0_step: the log step of the attack time."""
+    tracks: every log agent, the ego (`ego`) as it drove, the spliced rows as generated (`states`,
+    `valid`, `sizes`, `kinds` read its arrays: `ReadsTracks`); adversary: the adversary's log agent; spliced: the
+    log agents that follow generated tracks; t0_step: the log step of the attack time."""
 
     name: str
     attack: dict
     record: object              # adversary.crash.scenes.SceneRecord
-    states: np.ndarray
-    valid: np.ndarray
-    sizes: np.ndarray
-    kinds: np.ndarray
+    tracks: Tracks
     ego: int
     adversary: int
     spliced: tuple[int, ...]
@@ -89,7 +86,7 @@ class AttackedRun:
 
     @property
     def last_step(self) -> int:
-        return self.states.shape[1] - 1
+        return self.tracks.num_steps - 1
 
     @property
     def horizon_steps(self) -> int:
@@ -131,18 +128,17 @@ def attacked_run(attack: dict, record, name: str = "") -> AttackedRun:
                          f"adversary, its scene row {adversary_row} is agent {adversary}; pass the run's "
                          "own --scenes")
     spliced = tuple(int(record.agent_ids[r]) for r in rows)
-    return AttackedRun(name, attack, record, states, valid, log.sizes.copy(), log.kinds.copy(), ego,
+    return AttackedRun(name, attack, record, Tracks(states, valid, log.sizes.copy(), log.kinds.copy()), ego,
                        adversary, spliced, k0, float(log.dt_s))
 
 
-def collision_step(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, ego: int, other: int,
-                   from_step: int = 0) -> tuple[int | None, float]:
+def collision_step(tracks: Tracks, ego: int, other: int, from_step: int = 0) -> tuple[int | None, float]:
     """(first step >= from_step at which the boxes of `ego` and `other` overlap with IoU >
     COLLISION_IOU, that IoU); (None, largest IoU seen) if never: the judge's criterion
     (`adversary.crash.judge.first_collision`)."""
     from adversary.crash.judge import first_collision
 
-    step, _, iou = first_collision(states, valid, sizes, ego, [other], from_step)
+    step, _, iou = first_collision(tracks, ego, [other], from_step)
     return step, iou
 
 
@@ -374,7 +370,7 @@ def build_commonroad(run: AttackedRun) -> tuple:
     metrics = run.attack.get("metrics") or {}
     record_step = (None if metrics.get("collision_time_s") is None
                    else round(metrics["collision_time_s"] / run.dt_s) - k0)
-    recomputed, iou = collision_step(run.states, run.valid, run.sizes, run.ego, run.adversary, k0)
+    recomputed, iou = collision_step(run.tracks, run.ego, run.adversary, k0)
     rows = {int(a): r for r, a in enumerate(run.record.agent_ids)}
     sidecar = {
         "version": SIDECAR_VERSION, "format": "commonroad", "scene": run.name,
@@ -488,7 +484,8 @@ def exported_collision_step(xml: Path) -> int | None:
     ego, ego_valid = ego_track(sidecar, steps)
     sizes = np.array([[sidecar["ego"]["length_m"], sidecar["ego"]["width_m"]],
                       [adversary.obstacle_shape.length, adversary.obstacle_shape.width]])
-    step, _ = collision_step(np.stack([ego, adv]), np.stack([ego_valid, adv_valid]), sizes, 0, 1)
+    kinds = np.zeros(2, dtype=np.int8)        # AgentKind.VEHICLE: the kinds do not count here
+    step, _ = collision_step(Tracks(np.stack([ego, adv]), np.stack([ego_valid, adv_valid]), sizes, kinds), 0, 1)
     return step
 
 

@@ -33,6 +33,7 @@ from adversary.harden.windows import (
     window_steps,
     with_demonstrated_future,
 )
+from rasterize.tracks import Tracks
 from riskmap.sim.worlds.log_replay import HumanLog, ReplayPlanner
 
 
@@ -58,8 +59,8 @@ def _following(ego_states: np.ndarray, size: np.ndarray, dt_s: float) -> ReplayP
     return replay
 
 
-def _others(sizes: np.ndarray, ego: int) -> list[int]:
-    return [a for a in range(len(sizes)) if a != ego]
+def _others(tracks: Tracks, ego: int) -> list[int]:
+    return [a for a in range(tracks.num_agents) if a != ego]
 
 
 def search_failure_windows(search_config: dict, values: np.ndarray,
@@ -72,22 +73,22 @@ def search_failure_windows(search_config: dict, values: np.ndarray,
     config = config or HardenWindowConfig()
     values = np.asarray(values, dtype=np.float64)
     _, recorder = _drive(search_config, values)
-    states, valid, sizes, _ = recorder.arrays()
-    ego = recorder.ego_id
+    tracks = recorder.tracks()
+    ego, sizes = recorder.ego_id, tracks.sizes
     dt = recorder.dt_s
     lanes = recorder.scene(recorder.num_steps - 1, 0.0, 0.0, source=ENV_ID).lanes
-    hit, target, _ = first_collision(states, valid, sizes, ego, _others(sizes, ego), 0)
+    hit, target, _ = first_collision(tracks, ego, _others(tracks, ego), 0)
     if hit is None:
         return HardenWindows((), {"windows": 0, "why": "the search's drive does not collide"})
-    ego_full, info = clear_alternative(states, valid, sizes, ego, target, dt, lanes, config)
+    ego_full, info = clear_alternative(tracks, ego, target, dt, lanes, config)
     if ego_full is None:
         return HardenWindows((), {**info, "windows": 0})
     steps = window_steps(info, config, dt, recorder.num_steps - 1)
     if not steps:
         return HardenWindows((), {**info, "windows": 0, "why": NO_HISTORY})
     _, again = _drive(search_config, values, wrap_planner=lambda _: _following(ego_full, sizes[ego], dt))
-    states, valid, sizes, _ = again.arrays()
-    hit, _, _ = first_collision(states, valid, sizes, again.ego_id, _others(sizes, again.ego_id), 0)
+    drove = again.tracks()
+    hit, _, _ = first_collision(drove, again.ego_id, _others(drove, again.ego_id), 0)
     if hit is not None:
         return HardenWindows((), {**info, "windows": 0, "why": f"the alternative's drive collides at step {hit}"})
     scenes = tuple(with_demonstrated_future(again.scene(k, WINDOW_HISTORY_S, WINDOW_FUTURE_S, WINDOW_DT_S,

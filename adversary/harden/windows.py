@@ -42,6 +42,7 @@ from adversary.crash.judge import (
 )
 from adversary.crash.scenes import WINDOW_DT_S, SceneRecord
 from rasterize.errors import InputError
+from rasterize.tracks import Tracks
 from riskmap.sim.loop.plan import traits_of
 from riskmap.sim.records.alternatives import (
     alternative_track,
@@ -96,9 +97,9 @@ class HardenWindows:
     info: dict
 
 
-def attacked_drive(record: SceneRecord, attack: dict, planner, planner_spec: str) -> tuple:
-    """(states [A, S, 6], valid [A, S], sizes [A, 2], log agent of each row but the last) of the
-    attacked drive with the ego in the last row: the
+def attacked_drive(record: SceneRecord, attack: dict, planner, planner_spec: str) -> tuple[Tracks, list[int]]:
+    """(tracks, log agent of each row but the last) of the attacked drive with the ego in the
+    last row: the
     spliced log's agents (they replay it exactly) and the ego as the attack record holds it
     (`ego_states`), or as the planner drives it again for records from before they did."""
     tracks, rows = np.asarray(attack["tracks"], dtype=np.float64), attack["metrics"]["spliced_rows"]
@@ -114,24 +115,25 @@ def attacked_drive(record: SceneRecord, attack: dict, planner, planner_spec: str
     others = [a for a in range(len(log.sizes)) if a != log.ego_id]
     states = np.concatenate([log.states[others, :steps], ego[None, :steps]])
     valid = np.concatenate([log.valid[others, :steps], np.ones((1, steps), bool)])
-    return states, valid, np.concatenate([log.sizes[others], log.sizes[log.ego_id:log.ego_id + 1]]), others
+    sizes = np.concatenate([log.sizes[others], log.sizes[log.ego_id:log.ego_id + 1]])
+    kinds = np.concatenate([log.kinds[others], log.kinds[log.ego_id:log.ego_id + 1]])
+    return Tracks(states, valid, sizes, kinds), others
 
 
 def _lane_width_m(lanes) -> float:
     return float(np.median([lane.width_m for lane in lanes])) if lanes else 4.0
 
 
-def clear_alternative(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, ego: int, adversary: int,
-                      dt_s: float, lanes, config: HardenWindowConfig, from_step: int = 0,
-                      ) -> tuple[np.ndarray | None, dict]:
-    """Steps 1 and 2 of the module docstring on a drive's arrays (states [A, S, 6], valid [A, S],
-    sizes [A, 2]; agent `ego` collided with agent `adversary` at or after `from_step`; `lanes`
-    the road's): the collision-free ego [S + future, 6] from the drive's steps 0 ... S - 1 on, and
+def clear_alternative(tracks: Tracks, ego: int, adversary: int, dt_s: float, lanes,
+                      config: HardenWindowConfig, from_step: int = 0) -> tuple[np.ndarray | None, dict]:
+    """Steps 1 and 2 of the module docstring on a drive's `tracks` (agent `ego` collided with
+    agent `adversary` at or after `from_step`; `lanes` the road's): the collision-free ego
+    [S + future, 6] from the drive's steps 0 ... S - 1 on, and
     how it was found, or (None, why); info["collision_step"] is absent only if they never touch."""
-    k_c, _, _ = first_collision(states, valid, sizes, ego, [adversary], from_step)
+    k_c, _, _ = first_collision(tracks, ego, [adversary], from_step)
     if k_c is None:
         return None, {"why": "the attacked drive no longer collides with the adversary"}
-    end = states.shape[1] - 1
+    end = tracks.num_steps - 1
     start = max(1, k_c - round(config.lookback_s / dt_s))
     extra = round(WINDOW_FUTURE_S / dt_s)
     area = drivable_area(lanes)
@@ -146,23 +148,24 @@ def clear_alternative(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, 
         sideways = tuple(a for a in config.lateral_accels_mps2 if keep(a))
 
         def along_path():
-            return safest_clear_alternative(states, valid, sizes, ego, start, end, dt_s, along)
+            return safest_clear_alternative(tracks, ego, start, end, dt_s, along)
 
         def to_the_side():
-            return safest_clear_alternative(states, valid, sizes, ego, start, end, dt_s, sideways, (lane, -lane),
+            return safest_clear_alternative(tracks, ego, start, end, dt_s, sideways, (lane, -lane),
                                             on_road=on_road)
 
         found = (to_the_side() or along_path()) if config.choice == "lateral" else (along_path() or to_the_side())
     else:
-        found = first_clear_alternative(states, valid, sizes, ego, start, end, dt_s, config.accels_mps2) or \
-            first_clear_alternative(states, valid, sizes, ego, start, end, dt_s, config.lateral_accels_mps2,
+        found = first_clear_alternative(tracks, ego, start, end, dt_s, config.accels_mps2) or \
+            first_clear_alternative(tracks, ego, start, end, dt_s, config.lateral_accels_mps2,
                                     (lane, -lane), on_road=on_road)
     info = {"collision_step": int(k_c), "start_step": int(start), "end_step": int(end)}
     if found is None:
         return None, {**info, "why": "no alternative is clear"}
     accel, offset = found
-    after = alternative_track(states, valid, ego, start, end - start + extra, dt_s, accel, offset, path_until=end)
-    full = np.concatenate([states[ego, :start + 1], after])
+    after = alternative_track(tracks.states, tracks.valid, ego, start, end - start + extra, dt_s, accel,
+                              offset, path_until=end)
+    full = np.concatenate([tracks.states[ego, :start + 1], after])
     return full, {**info, "demonstration": "alternative", "accel_mps2": accel, "offset_m": offset}
 
 
@@ -170,11 +173,11 @@ def counterfactual_ego(record: SceneRecord, attack: dict, planner, planner_spec:
                        config: HardenWindowConfig) -> tuple[np.ndarray | None, dict]:
     """The collision-free ego [S + future, 6] (the log's steps from 0, then `WINDOW_FUTURE_S` more)
     and how it was found, or (None, why)."""
-    states, valid, sizes, others = attacked_drive(record, attack, planner, planner_spec)
+    tracks, others = attacked_drive(record, attack, planner, planner_spec)
     ego = len(others)
     adversary = others.index(int(record.agent_ids[attack["adversary_row"]]))
     dt = record.log.dt_s
-    full, info = clear_alternative(states, valid, sizes, ego, adversary, dt, record.window.lanes, config,
+    full, info = clear_alternative(tracks, ego, adversary, dt, record.window.lanes, config,
                                    from_step=record.t0_step)
     if full is not None or "collision_step" not in info or not config.human_fallback:
         return full, info

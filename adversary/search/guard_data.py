@@ -56,8 +56,7 @@ def search_windows(config: dict, values: np.ndarray, windows_config: GuardCollec
                                   windows_config.control_hz)
     drive, _ = run_scenario(get_template(config["template"]), values, evaluation, on_reset=keep)
     recorder = kept["run"].recorder
-    states, valid, sizes, kinds = recorder.arrays()
-    windows = extract_windows(states, valid, sizes, kinds, recorder.ego_id, bool(drive["collided"]),
+    windows = extract_windows(recorder.tracks(), recorder.ego_id, bool(drive["collided"]),
                               windows_config, rng)
     return windows, {"collided": bool(drive["collided"]), "simulated_s": drive["simulated_s"],
                      "windows": len(windows["ttc_s"]),

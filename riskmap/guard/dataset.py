@@ -35,6 +35,7 @@ import numpy as np
 
 from rasterize.errors import InputError
 from rasterize.timebase import CONTROL_HZ
+from rasterize.tracks import Tracks
 from riskmap.guard.events import nearest_by_separation, scene_separations
 from riskmap.guard.features import EDGE_DIM, MAX_HORIZON_S, NODE_DIM, OBSERVED, SEGMENT_S, window_features
 from riskmap.infra.atomic import write_json, write_npz
@@ -126,26 +127,26 @@ def crash_partner(ds_last: np.ndarray) -> int:
     return int(np.argmin(ds_last))
 
 
-def _features(states, valid, sizes, kinds, ego: int, pairs: list[tuple[int, int]], seg: int) -> dict:
+def _features(tracks: Tracks, ego: int, pairs: list[tuple[int, int]], seg: int) -> dict:
     out = {"node_u": np.zeros((len(pairs), NODE_DIM), np.float32),
            "node_i": np.zeros((len(pairs), NODE_DIM), np.float32),
            "edge": np.zeros((len(pairs), OBSERVED, EDGE_DIM), np.float32),
            "mask": np.zeros((len(pairs), OBSERVED), bool)}
     for w, (i, k) in enumerate(pairs):
         out["node_u"][w], out["node_i"][w], out["edge"][w], out["mask"][w] = window_features(
-            states, valid, sizes, kinds, ego, i, k, seg)
+            tracks, ego, i, k, seg)
     return out
 
 
-def extract_windows(states, valid, sizes, kinds, ego: int, crashed: bool, config: GuardCollectConfig,
+def extract_windows(tracks: Tracks, ego: int, crashed: bool, config: GuardCollectConfig,
                     rng: np.random.Generator) -> dict[str, np.ndarray]:
-    """Windows and decision frames of one recorded episode (arrays as `TrafficRecorder.arrays()`,
+    """Windows and decision frames of one recorded episode (`tracks` as `TrafficRecorder.tracks()`,
     1/control_hz s; a crashed episode ends at its crash step). Keys: node_u, node_i, edge, mask,
     ttc_s, neighbour, last_step (the windows), frame_* and frame, frames (module docstring)."""
     seg = round(SEGMENT_S * config.control_hz)
     horizon = round(MAX_HORIZON_S * config.control_hz)
-    n_steps = states.shape[1]
-    ds = scene_separations(states, valid, sizes, ego)
+    valid, n_steps = tracks.valid, tracks.num_steps
+    ds = scene_separations(tracks, ego)
     crash_step = n_steps - 1 if crashed else None
     partner = crash_partner(ds[:, -1]) if crashed else None
     positives = [(partner, k) for k in range(crash_step - horizon, crash_step)
@@ -161,7 +162,7 @@ def extract_windows(states, valid, sizes, kinds, ego: int, crashed: bool, config
         rest = rng.choice(order[half:], config.negatives_per_episode - half, replace=False)
         negatives = [negatives[j] for j in sorted(nearest + list(rest))]
     pairs = positives + negatives
-    out = _features(states, valid, sizes, kinds, ego, pairs, seg)
+    out = _features(tracks, ego, pairs, seg)
     out["ttc_s"] = np.array([(crash_step - k) / config.control_hz if i == partner else np.inf
                              for i, k in pairs], np.float32)
     out["neighbour"] = np.array([i for i, _ in pairs], np.int32)
@@ -173,7 +174,7 @@ def extract_windows(states, valid, sizes, kinds, ego: int, crashed: bool, config
             frame_pairs.append((i, k))
             frame_of.append(f)
     out.update({f"frame_{key}": value for key, value in
-                _features(states, valid, sizes, kinds, ego, frame_pairs, seg).items()})
+                _features(tracks, ego, frame_pairs, seg).items()})
     out["frame"] = np.array(frame_of, np.int32)
     out["frames"] = np.array([len(frame_steps)], np.int32)
     return out
@@ -198,9 +199,8 @@ def run_job(job: Job, config: GuardCollectConfig, env, planner) -> tuple[dict, d
     drive_config = DriveConfig(job.env_id, job.episode + 1, seed=job.seed, control_hz=config.control_hz,
                                episode_s=config.episode_s)
     record = drive_episode(env, planner, drive_config, job.episode, hooks=DriveHooks(on_ready=hooks))
-    states, valid, sizes, kinds = keep.run.recorder.arrays()
     rng = np.random.default_rng([job.seed, job.episode, int(job.aggressive), 7])
-    windows = extract_windows(states, valid, sizes, kinds, keep.run.recorder.ego_id, bool(record["collided"]),
+    windows = extract_windows(keep.run.recorder.tracks(), keep.run.recorder.ego_id, bool(record["collided"]),
                               config, rng)
     meta = {**asdict(job), "collided": bool(record["collided"]), "simulated_s": record["simulated_s"],
             "aggressor": bool(hooks[-1].aggressor is not None) if job.aggressive else False,

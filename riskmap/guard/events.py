@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from rasterize.scene import Scene
+from rasterize.tracks import Tracks
 
 
 def half_extent_along(direction_rad: np.ndarray, yaw_rad: np.ndarray, sizes: np.ndarray) -> np.ndarray:
@@ -35,9 +36,10 @@ def projected_separation(centre_a: np.ndarray, yaw_a: np.ndarray, size_a: np.nda
     return d - half_extent_along(direction, yaw_a, size_a) - half_extent_along(direction, yaw_b, size_b)
 
 
-def scene_separations(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, ego: int) -> np.ndarray:
-    """d_s between the ego and every agent at every step, [N, T] metres (inf where either is absent
-    and for the ego itself). states [N, T, 6] and valid [N, T] as in `rasterize.scene`."""
+def scene_separations(tracks: Tracks, ego: int) -> np.ndarray:
+    """d_s between the ego and every agent at every step, [A, S] metres (inf where either is absent
+    and for the ego itself)."""
+    states, valid, sizes = tracks.states, tracks.valid, tracks.sizes
     yaw = np.arctan2(states[..., 3], states[..., 2])
     ds = projected_separation(states[ego:ego + 1, :, :2], yaw[ego:ego + 1], sizes[ego][None, None],
                               states[..., :2], yaw, sizes[:, None, :])
@@ -55,6 +57,6 @@ def nearest_by_separation(ds: np.ndarray, count: int) -> list[int]:
 def nearest_neighbours(scene: Scene, count: int = 2) -> list[int]:
     """Indices of the `count` agents with the smallest d_s to the ego now (fewer if absent)."""
     now = scene.current_index
-    ds = scene_separations(scene.states[:, now:now + 1], scene.valid[:, now:now + 1], scene.sizes,
-                           scene.ego_index)[:, 0]
+    ds = scene_separations(Tracks(scene.states[:, now:now + 1], scene.valid[:, now:now + 1], scene.sizes,
+                                  scene.kinds), scene.ego_index)[:, 0]
     return nearest_by_separation(ds, count)

@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from rasterize.scene import AgentKind
+from rasterize.tracks import Tracks
 from riskmap.guard.events import projected_separation
 
 OBSERVED = 6          # observed segments
@@ -57,14 +58,14 @@ def relative_motion(su: np.ndarray, si: np.ndarray) -> np.ndarray:
                     axis=-1)
 
 
-def window_features(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, kinds: np.ndarray,
-                    ego: int, neighbour: int, last_step: int, segment_steps: int
+def window_features(tracks: Tracks, ego: int, neighbour: int, last_step: int, segment_steps: int
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(node_u, node_i, edge, mask) of the window whose last observed event is at `last_step`.
 
-    states [A, S, 6], valid [A, S], sizes [A, 2], kinds [A] (a recording or a Scene's arrays);
-    the events are at last_step − segment_steps·(5, 4, ..., 0).
+    `tracks`: a recording's, or a Scene's arrays as `Tracks`; the events are at
+    last_step − segment_steps·(5, 4, ..., 0).
     """
+    states, valid, sizes, kinds = tracks.states, tracks.valid, tracks.sizes, tracks.kinds
     steps = last_step - segment_steps * np.arange(OBSERVED - 1, -1, -1)
     inside = steps >= 0
     safe = np.where(inside, steps, 0)

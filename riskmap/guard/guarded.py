@@ -33,6 +33,7 @@ from rasterize.errors import InputError
 from rasterize.frames import ego_from_world, ego_pose
 from rasterize.geometry import Polyline
 from rasterize.scene import Scene
+from rasterize.tracks import Tracks
 from riskmap.guard.events import nearest_neighbours
 from riskmap.guard.features import OBSERVED, SEGMENT_S
 from riskmap.registry import make_planner
@@ -121,8 +122,7 @@ class Guard:
         max_score, ttc_s = None, None
         if cfg.trigger == "tgat":
             neighbours = nearest_neighbours(scene, cfg.neighbours)
-            scores, ttcs = self.predictor.score(scene.states, scene.valid, scene.sizes, scene.kinds,
-                                                scene.ego_index, neighbours, scene.current_index, 1)
+            scores, ttcs = self.predictor.score(Tracks.of_scene(scene), scene.ego_index, neighbours, scene.current_index, 1)
             max_score = float(scores.max()) if len(scores) else 0.0
             alert = max_score >= self.predictor.alert_threshold
             ttc_s = float(ttcs[np.argmax(scores)]) if alert else None

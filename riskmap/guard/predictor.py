@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from rasterize.tracks import Tracks
 from riskmap.guard.features import window_features
 from riskmap.guard.tgat import TGAT, TGATConfig
 
@@ -27,14 +28,13 @@ class AccidentPredictor:
         return cls(model, side["alert_threshold"])
 
     @torch.no_grad()
-    def score(self, states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, kinds: np.ndarray, ego: int,
-              neighbours: list[int], last_step: int, segment_steps: int) -> tuple[np.ndarray, np.ndarray]:
+    def score(self, tracks: Tracks, ego: int, neighbours: list[int], last_step: int, segment_steps: int
+              ) -> tuple[np.ndarray, np.ndarray]:
         """(accident probabilities, times to contact in s), each [len(neighbours)], of the windows
-        ending at `last_step` (arrays as `riskmap.guard.features.window_features`)."""
+        ending at `last_step` (`tracks` as `riskmap.guard.features.window_features`)."""
         if not neighbours:
             return np.zeros(0), np.zeros(0)
-        parts = [window_features(states, valid, sizes, kinds, ego, i, last_step, segment_steps)
-                 for i in neighbours]
+        parts = [window_features(tracks, ego, i, last_step, segment_steps) for i in neighbours]
         tensors = [torch.from_numpy(np.stack([p[k] for p in parts])) for k in range(4)]
         logits, ttc = self.model(tensors[0].float(), tensors[1].float(), tensors[2].float(), tensors[3].bool())
         return torch.sigmoid(logits).numpy().astype(np.float64), ttc.numpy().astype(np.float64)

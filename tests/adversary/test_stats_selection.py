@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from adversary.attacks.monitor import collision_type
+from rasterize.tracks import Tracks
 from riskmap.infra.stats import bootstrap_mean, sign_test, wilson
 from riskmap.sim.drivers.aggressive import softmin_agent_weights
 from riskmap.sim.records.alternatives import ego_only_solution
@@ -77,17 +78,17 @@ def _straight_record(other_x: np.ndarray, other_y: float = 0.0):
     states[1, :, 0] = other_x
     states[1, :, 1] = other_y
     states[1, :, 2] = 1.0
-    return states, np.ones((2, steps), bool), np.array([[5.0, 2.0], [5.0, 2.0]])
+    return Tracks(states, np.ones((2, steps), bool), np.array([[5.0, 2.0], [5.0, 2.0]]), np.zeros(2, np.int8))
 
 
 def test_braking_solves_a_stopped_car_ahead():
     # A stopped car at x = 35: the ego reaches it after ~3 s at 10 m/s; braking from 3 s earlier
     # (start at x = 0 at 10 m/s, -4 m/s² stops within 12.5 m) avoids it.
-    states, valid, sizes = _straight_record(np.full(31, 35.0))
-    assert ego_only_solution(states, valid, sizes, ego=0, collision_step=30, dt_s=0.1)
+    tracks = _straight_record(np.full(31, 35.0))
+    assert ego_only_solution(tracks, ego=0, collision_step=30, dt_s=0.1)
 
 
 def test_no_solution_when_the_other_car_sits_on_the_ego():
     # The other car is on top of the ego's start position the whole time: nothing along the path helps.
-    states, valid, sizes = _straight_record(np.zeros(31))
-    assert not ego_only_solution(states, valid, sizes, ego=0, collision_step=30, dt_s=0.1)
+    tracks = _straight_record(np.zeros(31))
+    assert not ego_only_solution(tracks, ego=0, collision_step=30, dt_s=0.1)

@@ -10,6 +10,7 @@ import numpy as np
 from rasterize.config import family_of_env
 from rasterize.errors import InputError
 from rasterize.timebase import CONTROL_HZ, REPLAN_HZ
+from rasterize.tracks import Tracks
 from riskmap.evaluation.sources.base import planner_label, worker_planner
 from riskmap.registry import display_names
 from riskmap.sim.loop.rollout import check_replan_hz
@@ -136,10 +137,11 @@ class EnvScenario:
         human_xy = log.ego_xy()
         base = {"label": planner_label(spec), "episode": self.episode, "mode": s.mode}
         if spec == "idm":
-            metrics = trajectory_metrics(log.states, log.valid, log.sizes, log.ego_id, log.dt_s, human_xy, s.safety)
-            contact = first_contact(log.states, log.valid, log.sizes, log.ego_id) if log.crashed else None
+            tracks = log.tracks()
+            metrics = trajectory_metrics(tracks, log.ego_id, log.dt_s, human_xy, s.safety)
+            contact = first_contact(tracks, log.ego_id) if log.crashed else None
             base["failure"] = None if contact is None else classify_failure(
-                log.states, log.valid, log.sizes, log.ego_id, contact[1], contact[0], log.dt_s)
+                tracks, log.ego_id, contact[1], contact[0], log.dt_s)
             return _table_record(spec, base, metrics, log.crashed, log.off_road, None)
         env = cached_env(s.env_id, s.control_hz)
         planner = worker_planner(spec, s.seed)
@@ -153,8 +155,7 @@ class EnvScenario:
             run = Episode(env, s.env_id, s.seed, self.episode, s.control_hz)
         drive_config = DriveConfig(s.env_id, s.episodes, s.seed, s.control_hz, s.replan_hz, s.episode_s)
         record = drive_episode(env, planner, drive_config, self.episode, run=run)
-        states, valid, sizes, _ = run.recorder.arrays()
-        metrics = trajectory_metrics(states, valid, sizes, run.recorder.ego_id, run.dt, human_xy, s.safety)
+        metrics = trajectory_metrics(run.recorder.tracks(), run.recorder.ego_id, run.dt, human_xy, s.safety)
         base["failure"] = classify_run(run) if record["collided"] else None
         return _table_record(spec, base, metrics, record["collided"], record["off_road"], record)
 
@@ -184,9 +185,10 @@ def _table_record(spec: str, base: dict, metrics: dict, collided: bool, off_road
         no_solution_plans=drive.get("no_solution_plans", 0), no_solution_first=drive.get("no_solution_first"),
         extra={**base, **metrics}).as_dict()
 
-def trajectory_metrics(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, ego_id: int,
-                       dt_s: float, human_xy: np.ndarray, safety: SafetyConfig) -> dict:
-    """Metrics of one driven episode from its record (states [A, S, 6], valid [A, S], sizes [A, 2])."""
+def trajectory_metrics(tracks: Tracks, ego_id: int, dt_s: float, human_xy: np.ndarray,
+                       safety: SafetyConfig) -> dict:
+    """Metrics of one driven episode from its record's `tracks`."""
+    states, valid, sizes = tracks.states, tracks.valid, tracks.sizes
     ego = states[ego_id][valid[ego_id]]
     others = np.delete(np.arange(states.shape[0]), ego_id)
     dangerous, encounters = dangerous_encounters(ego, sizes[ego_id], states[others], valid[others],

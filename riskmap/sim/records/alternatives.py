@@ -24,6 +24,7 @@ import numpy as np
 
 from rasterize.frames import box_corners
 from rasterize.geometry import boxes_overlap
+from rasterize.tracks import Tracks
 from riskmap.sim.records.metrics import min_box_gap
 
 DEFAULT_ACCELS_MPS2 = (-8.0, -6.0, -4.0, -2.0, 0.0, 1.0, 2.0, 3.0)
@@ -43,20 +44,18 @@ def _along(path: np.ndarray, distance_m: float) -> tuple[np.ndarray, np.ndarray]
     return path[keep.nonzero()[0][i]] + (distance_m - cum[i]) * direction, direction
 
 
-def ego_only_solution(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, ego: int,
-                      collision_step: int, dt_s: float, lookback_s: float = 3.0,
+def ego_only_solution(tracks: Tracks, ego: int, collision_step: int, dt_s: float, lookback_s: float = 3.0,
                       accels_mps2: tuple[float, ...] = DEFAULT_ACCELS_MPS2,
                       max_speed_mps: float = 40.0, near_m: float = 40.0,
                       lateral_offsets_m: tuple[float, ...] = (), lateral_blend_s: float = 2.0,
                       on_road=None) -> bool:
     """True if some alternative avoids every other agent (see the module docstring).
 
-    states [A, S, 6] world frame (x, y, cos, sin, speed, yaw rate), valid [A, S], sizes [A, 2]
-    (length, width): a TrafficRecorder's arrays; `collision_step` indexes S.
+    `tracks`: a TrafficRecorder's (or a rollout's) `Tracks`; `collision_step` indexes its steps.
     """
     if lateral_offsets_m and on_road is None:
         raise ValueError("lateral alternatives need on_road to keep the ego on the road")
-    return any(_clear(states, valid, sizes, ego, collision_step, dt_s, lookback_s, accel, max_speed_mps,
+    return any(_clear(tracks, ego, collision_step, dt_s, lookback_s, accel, max_speed_mps,
                       near_m, offset, lateral_blend_s, on_road)
                for offset in (0.0, *lateral_offsets_m) for accel in accels_mps2)
 
@@ -94,8 +93,8 @@ def alternative_track(states: np.ndarray, valid: np.ndarray, ego: int, start: in
     return out
 
 
-def first_clear_alternative(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, ego: int, start: int,
-                            until: int, dt_s: float, accels_mps2: tuple[float, ...], offsets_m: tuple[float, ...] = (0.0,),
+def first_clear_alternative(tracks: Tracks, ego: int, start: int, until: int, dt_s: float,
+                            accels_mps2: tuple[float, ...], offsets_m: tuple[float, ...] = (0.0,),
                             blend_s: float = 2.0, max_speed_mps: float = 40.0, near_m: float = 40.0,
                             on_road=None) -> tuple[float, float] | None:
     """(acceleration, offset) of the first alternative (offsets outer, accelerations inner, in
@@ -105,16 +104,15 @@ def first_clear_alternative(states: np.ndarray, valid: np.ndarray, sizes: np.nda
         if offset and on_road is None:
             raise ValueError("lateral alternatives need on_road to keep the ego on the road")
         for accel in accels_mps2:
-            if _clear(states, valid, sizes, ego, until, dt_s, (until - start) * dt_s, accel, max_speed_mps,
-                      near_m, offset, blend_s, on_road, path_until=states.shape[1] - 1):
+            if _clear(tracks, ego, until, dt_s, (until - start) * dt_s, accel, max_speed_mps,
+                      near_m, offset, blend_s, on_road, path_until=tracks.num_steps - 1):
                 return accel, offset
     return None
 
 
-def safest_clear_alternative(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, ego: int, start: int,
-                             until: int, dt_s: float, accels_mps2: tuple[float, ...],
-                             offsets_m: tuple[float, ...] = (0.0,), blend_s: float = 2.0,
-                             max_speed_mps: float = 40.0, near_m: float = 40.0,
+def safest_clear_alternative(tracks: Tracks, ego: int, start: int, until: int, dt_s: float,
+                             accels_mps2: tuple[float, ...], offsets_m: tuple[float, ...] = (0.0,),
+                             blend_s: float = 2.0, max_speed_mps: float = 40.0, near_m: float = 40.0,
                              on_road=None) -> tuple[float, float] | None:
     """(acceleration, offset) of the clear alternative (as `first_clear_alternative` judges it)
     that keeps the largest smallest box gap (m) to every other agent within `near_m` over steps
@@ -125,20 +123,21 @@ def safest_clear_alternative(states: np.ndarray, valid: np.ndarray, sizes: np.nd
             raise ValueError("lateral alternatives need on_road to keep the ego on the road")
         for accel in accels_mps2:
             gaps: list[float] = []
-            if _clear(states, valid, sizes, ego, until, dt_s, (until - start) * dt_s, accel, max_speed_mps,
-                      near_m, offset, blend_s, on_road, path_until=states.shape[1] - 1, gaps=gaps):
+            if _clear(tracks, ego, until, dt_s, (until - start) * dt_s, accel, max_speed_mps,
+                      near_m, offset, blend_s, on_road, path_until=tracks.num_steps - 1, gaps=gaps):
                 gap = min(gaps, default=np.inf)
                 if gap > best_gap:
                     best, best_gap = (accel, offset), gap
     return best
 
 
-def _clear(states, valid, sizes, ego, collision_step, dt_s, lookback_s, accel, max_speed_mps, near_m,
+def _clear(tracks: Tracks, ego, collision_step, dt_s, lookback_s, accel, max_speed_mps, near_m,
            offset_m, blend_s, on_road, path_until=None, gaps: list | None = None) -> bool:
     """True if the ego, braking/accelerating at `accel` along its path shifted sideways by
     `offset_m` (blended in over `blend_s`), overlaps no other box and stays on the road, from
     `lookback_s` before `collision_step` to it (its path: up to `path_until`, default the
     collision step). `gaps`, when given, receives the smallest box gap (m) of every step."""
+    states, valid, sizes = tracks.states, tracks.valid, tracks.sizes
     start = max(0, collision_step - round(lookback_s / dt_s))
     track = alternative_track(states, valid, ego, start, collision_step - start, dt_s, accel, offset_m, blend_s,
                               max_speed_mps, path_until=collision_step if path_until is None else path_until,

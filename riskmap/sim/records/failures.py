@@ -3,10 +3,9 @@
 A collision says something about the planner under test only if the ego could have avoided it;
 an attack says something only if the adversary did it alone and drove like a car. Every
 collision record of every attack, the search, the aggressive neighbour and natural traffic,
-simulated or recorded, is classified by `classify_failure` on the recorder's arrays:
-states [A, S, 6] world (x, y, heading_x, heading_y, speed, yaw_rate), valid [A, S], sizes [A, 2]
-(length, width) m, `ego` and `other` agent indices, `collision_step` an index into S, dt_s the
-step (s).
+simulated or recorded, is classified by `classify_failure` on the recorder's `Tracks`
+(rasterize.tracks: states, valid, sizes over A agents and S steps), `ego` and `other` agent
+indices, `collision_step` an index into S, dt_s the step (s).
 
 fault (`collision_fault`): where the other is, seen from the ego at the collision step: the
 angle between the ego's heading and the line from its centre to the other's (nuPlan's rule for
@@ -61,6 +60,7 @@ import numpy as np
 
 from rasterize.frames import box_corners
 from rasterize.geometry import box_gap, boxes_overlap
+from rasterize.tracks import Tracks
 from riskmap.sim.records.alternatives import first_clear_alternative
 from riskmap.sim.records.metrics import STRIVE, box_iou, in_frame, overlap_within
 
@@ -156,11 +156,11 @@ def _cv_meets(states, sizes, ego: int, other: int, step: int) -> bool:
     return overlap_within(mine, e[4] * e[2:4], theirs, o[4] * o[2:4], VISIBILITY_HORIZON_S, VISIBILITY_STEP_S)
 
 
-def threat_visible_step(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, ego: int, other: int,
-                        collision_step: int, from_step: int = 0) -> int:
+def threat_visible_step(tracks: Tracks, ego: int, other: int, collision_step: int, from_step: int = 0) -> int:
     """The first step of the last uninterrupted run (ending at `collision_step`, not before
     `from_step`) in which the constant-velocity predictions of `ego` and `other` meet; the
     collision step itself when none did just before it."""
+    states, valid, sizes = tracks.states, tracks.valid, tracks.sizes
     step = collision_step
     while step - 1 >= from_step and valid[ego, step - 1] and valid[other, step - 1] \
             and _cv_meets(states, sizes, ego, other, step - 1):
@@ -168,22 +168,22 @@ def threat_visible_step(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray
     return step
 
 
-def avoidability(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, ego: int, other: int,
-                 collision_step: int, dt_s: float, on_road=None, lane_width_m: float | None = None,
-                 from_step: int = 0) -> Avoidance:
+def avoidability(tracks: Tracks, ego: int, other: int, collision_step: int, dt_s: float, on_road=None,
+                 lane_width_m: float | None = None, from_step: int = 0) -> Avoidance:
     """Whether (and how) the ego could have avoided the collision after seeing it coming (module
     docstring). `on_road(centre [2], heading [2], length, width) -> bool` and `lane_width_m`
     enable the lane-change alternatives; without them only the longitudinal ones are tried."""
-    visible = threat_visible_step(states, valid, sizes, ego, other, collision_step, from_step)
+    states, valid = tracks.states, tracks.valid
+    visible = threat_visible_step(tracks, ego, other, collision_step, from_step)
     react = visible + round(REACTION_S / dt_s)
     if react >= collision_step:
         return Avoidance(visible, react, None, None)
     until = min(states.shape[1] - 1, collision_step + round(AFTER_COLLISION_S / dt_s))
     while until > collision_step and not valid[ego, until] and not valid[other, until]:
         until -= 1               # the record ended: judge up to its last step
-    found = first_clear_alternative(states, valid, sizes, ego, react, until, dt_s, AVOID_ACCELS_MPS2)
+    found = first_clear_alternative(tracks, ego, react, until, dt_s, AVOID_ACCELS_MPS2)
     if found is None and on_road is not None and lane_width_m:
-        found = first_clear_alternative(states, valid, sizes, ego, react, until, dt_s,
+        found = first_clear_alternative(tracks, ego, react, until, dt_s,
                                         AVOID_LANE_CHANGE_ACCELS_MPS2, (lane_width_m, -lane_width_m),
                                         blend_s=LANE_CHANGE_BLEND_S, on_road=on_road)
     if found is None:
@@ -257,10 +257,10 @@ def revalidated(failure: dict, limits: KinematicLimits) -> dict:
             "counts": bool(valid and failure["avoidable"] and failure["fault"] == "at fault")}
 
 
-def other_hits(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, agent: int, exclude: int,
-               from_step: int, to_step: int) -> list[int]:
+def other_hits(tracks: Tracks, agent: int, exclude: int, from_step: int, to_step: int) -> list[int]:
     """Agents (but `exclude`) whose box `agent`'s overlaps with IoU above STRIVE's 0.02 at some
     step from_step ... to_step - 1."""
+    states, valid, sizes = tracks.states, tracks.valid, tracks.sizes
     reach = 0.5 * (np.hypot(*sizes[agent]) + np.hypot(sizes[:, 0], sizes[:, 1]))
     hit = set()
     for k in range(from_step, to_step):
@@ -275,15 +275,15 @@ def other_hits(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, agent: 
     return sorted(hit)
 
 
-def attack_validity(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, ego: int, adversary: int,
-                    collision_step: int, dt_s: float, lane_width_m: float, off_road: bool | None = None,
-                    from_step: int = 0, limits: KinematicLimits = CAR_LIMITS) -> dict:
+def attack_validity(tracks: Tracks, ego: int, adversary: int, collision_step: int, dt_s: float,
+                    lane_width_m: float, off_road: bool | None = None, from_step: int = 0,
+                    limits: KinematicLimits = CAR_LIMITS) -> dict:
     """{"valid", "reasons", "kinematics", "hit_agents"}: whether the adversary caused the
     collision alone, on the road and within the kinematic limits (module docstring); reasons
     name what failed ("hit another agent", "off road", a limit's constant)."""
-    hits = other_hits(states, valid, sizes, adversary, ego, from_step, collision_step)
+    hits = other_hits(tracks, adversary, ego, from_step, collision_step)
     span = np.arange(from_step, collision_step + 1)
-    track = states[adversary, span][valid[adversary, span]]
+    track = tracks.states[adversary, span][tracks.valid[adversary, span]]
     kinematics = adversary_kinematics(track, dt_s, lane_width_m)
     reasons = (["hit another agent"] if hits else []) + (["off road"] if off_road else []) \
         + kinematic_violations(kinematics, limits)
@@ -306,10 +306,10 @@ def road_rules(lanes) -> dict:
     return {"on_road": on_road, "lane_width_m": float(np.median([lane.width_m for lane in lanes]))}
 
 
-def classify_failure(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, ego: int, other: int,
-                     collision_step: int, dt_s: float, *, attack: bool = False, on_road=None,
-                     lane_width_m: float | None = None, adversary_off_road: bool | None = None,
-                     from_step: int = 0, limits: KinematicLimits = CAR_LIMITS) -> dict:
+def classify_failure(tracks: Tracks, ego: int, other: int, collision_step: int, dt_s: float, *,
+                     attack: bool = False, on_road=None, lane_width_m: float | None = None,
+                     adversary_off_road: bool | None = None, from_step: int = 0,
+                     limits: KinematicLimits = CAR_LIMITS) -> dict:
     """The classification of one collision between `ego` and `other` (JSON-ready):
 
     fault, avoidable, visible_time_s / reaction_time_s (times of the record, steps * dt_s),
@@ -318,8 +318,8 @@ def classify_failure(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, e
     hit_agents; counts: what the headline counts, a valid (attacks), avoidable, at-fault failure.
     `limits`: the kinematic limits of a valid attack (HIGHWAY_ENV_LIMITS in highway-env worlds).
     """
-    fault = collision_fault(states[ego, collision_step], states[other, collision_step])
-    avoid = avoidability(states, valid, sizes, ego, other, collision_step, dt_s, on_road, lane_width_m, from_step)
+    fault = collision_fault(tracks.states[ego, collision_step], tracks.states[other, collision_step])
+    avoid = avoidability(tracks, ego, other, collision_step, dt_s, on_road, lane_width_m, from_step)
     out = {
         "fault": fault, "avoidable": avoid.avoidable,
         "visible_time_s": round(avoid.visible_step * dt_s, 6),
@@ -328,8 +328,8 @@ def classify_failure(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, e
     }
     valid_attack = True
     if attack:
-        validity = attack_validity(states, valid, sizes, ego, other, collision_step, dt_s,
-                                   lane_width_m or LANE_WIDTH_M, adversary_off_road, from_step, limits)
+        validity = attack_validity(tracks, ego, other, collision_step, dt_s, lane_width_m or LANE_WIDTH_M,
+                                   adversary_off_road, from_step, limits)
         valid_attack = validity["valid"]
         out.update(valid_attack=valid_attack, invalid_reasons=validity["reasons"],
                    kinematics=validity["kinematics"], hit_agents=validity["hit_agents"])
@@ -376,12 +376,13 @@ def summarise_failures(classified: list[dict | None], trials: int) -> dict:
 CRASH_FLAG_GAP_M = 3.0
 
 
-def first_contact(states: np.ndarray, valid: np.ndarray, sizes: np.ndarray, ego: int,
-                  from_step: int = 0, crash_flagged: bool = False) -> tuple[int, int] | None:
+def first_contact(tracks: Tracks, ego: int, from_step: int = 0, crash_flagged: bool = False
+                  ) -> tuple[int, int] | None:
     """(step, agent) of the ego's first box overlap with another agent from `from_step` on (the
     nearest such agent when several); None if it never touches one. For drives whose record
     keeps no partner (a highway-env episode's crash flag names none): with `crash_flagged` and no
     overlap, the ego's last step and the agent nearest to it there within CRASH_FLAG_GAP_M."""
+    states, valid, sizes = tracks.states, tracks.valid, tracks.sizes
     reach = 0.5 * (np.hypot(*sizes[ego]) + np.hypot(sizes[:, 0], sizes[:, 1]))
     for k in range(from_step, states.shape[1]):
         if not valid[ego, k]:
@@ -456,14 +457,14 @@ def classify_run(run, adversary=None, contact: tuple[int, int] | None = None,
     is found."""
     from riskmap.sim.records.metrics import lane_width_at, on_network
 
-    states, valid, sizes, _ = run.recorder.arrays()
+    tracks = run.recorder.tracks()
     ego = run.recorder.ego_id
-    contact = contact or first_contact(states, valid, sizes, ego, crash_flagged=True)
+    contact = contact or first_contact(tracks, ego, crash_flagged=True)
     if contact is None:
         return None
     step, partner = contact
     road = run.base.road
     attack = adversary is not None and partner == run.recorder.known_id(adversary)
-    return classify_failure(states, valid, sizes, ego, partner, step, run.dt, attack=attack,
+    return classify_failure(tracks, ego, partner, step, run.dt, attack=attack,
                             on_road=on_network(road), lane_width_m=lane_width_at(road, run.ego),
                             adversary_off_road=adversary_off_road, limits=HIGHWAY_ENV_LIMITS)

@@ -51,6 +51,7 @@ from rasterize.frames import (
 from rasterize.geometry import box_gap
 from rasterize.scene import STATE_DIM, Scene
 from rasterize.timebase import CONTROL_HZ, HISTORY_S, REPLAN_HZ
+from rasterize.tracks import Tracks
 from riskmap.sim.loop.control import planned_vehicle_class
 from riskmap.sim.records.metrics import (
     SafetyConfig,
@@ -322,7 +323,8 @@ class CommonRoadWorld:
         states = np.concatenate([ego[None], others])
         valid = np.concatenate([np.ones((1, len(times)), bool), valid])
         sizes = np.concatenate([self.traffic.sizes[[self.ego_index]], self.traffic.sizes[near]])
-        return classify_failure(states, valid, sizes, 0, 1, len(times) - 1, self.dt,
+        kinds = np.concatenate([self.traffic.kinds[[self.ego_index]], self.traffic.kinds[near]])
+        return classify_failure(Tracks(states, valid, sizes, kinds), 0, 1, len(times) - 1, self.dt,
                                 from_step=self.history_len - 1)
 
     def _move_ego(self) -> np.ndarray:

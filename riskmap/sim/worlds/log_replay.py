@@ -20,6 +20,7 @@ from rasterize.errors import InputError
 from rasterize.frames import ego_from_world, heading_angle, highway_env_from_world, world_from_highway_env
 from rasterize.scene import Scene
 from rasterize.timebase import CONTROL_HZ
+from rasterize.tracks import Tracks
 from riskmap.infra.atomic import write_npz
 from riskmap.sim.worlds.episode import FAMILY_SETUPS, Episode
 from riskmap.sim.records.metrics import centre_off_lane
@@ -55,6 +56,10 @@ class HumanLog:
         end = int(np.argmin(valid)) if not valid.all() else len(valid)
         return self.states[self.ego_id, :end, :2]
 
+    def tracks(self) -> Tracks:
+        """The log's arrays as `Tracks` (not copied; no ids)."""
+        return Tracks(self.states, self.valid, self.sizes, self.kinds)
+
     def save(self, path: Path) -> None:
         write_npz(path, {"states": self.states, "valid": self.valid, "sizes": self.sizes,
                          "kinds": self.kinds, "ego_id": np.int64(self.ego_id),
@@ -75,8 +80,9 @@ class HumanLog:
 
 def log_of(run: Episode) -> HumanLog:
     """The HumanLog of an episode that has been driven."""
-    states, valid, sizes, kinds = run.recorder.arrays()
-    return HumanLog(states.copy(), valid.copy(), sizes.copy(), kinds.copy(), run.recorder.ego_id,
+    tracks = run.recorder.tracks()
+    return HumanLog(tracks.states.copy(), tracks.valid.copy(), tracks.sizes.copy(), tracks.kinds.copy(),
+                    run.recorder.ego_id,
                     run.dt, bool(run.crashed), bool(run.off_network))
 
 
@@ -185,7 +191,7 @@ class LogReplayEpisode(Episode):
 
         Known by construction, since every replayed vehicle is made for one log agent: the
         rollout keeps agent ids, nothing is matched by position afterwards."""
-        ids = np.full(len(self.recorder.arrays()[2]), -1, dtype=np.int64)
+        ids = np.full(self.recorder.tracks().num_agents, -1, dtype=np.int64)
         for vehicle, agent in self._replays:
             recorder_id = self.recorder.known_id(vehicle)
             if recorder_id is not None:

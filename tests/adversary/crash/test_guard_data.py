@@ -11,6 +11,7 @@ from adversary.crash.judge import box_iou, braking_track, judge, rollout
 from adversary.crash.scenes import AttackScene, record_attack_scene, save_record
 from rasterize.errors import InputError
 from rasterize.scene import AgentKind
+from rasterize.tracks import Tracks
 from riskmap.guard.dataset import labels_for, load_frames, load_split
 from riskmap.guard.features import MAX_HORIZON_S
 from riskmap.infra.atomic import write_json
@@ -177,11 +178,11 @@ def test_contact_onset_walks_back_over_the_unbroken_overlap():
     states[1, :, 0] = xs
     states[2, :, 1] = 50.0
     valid = np.ones((3, len(xs)), bool)
-    sizes = np.array([[5.0, 2.0]] * 3)
+    tracks = Tracks(states, valid, np.array([[5.0, 2.0]] * 3), np.zeros(3, np.int8))
     # Boxes 5 m long touch below 5 m between centres: overlap from step 3 (x = 4) on.
-    assert contact_onset(states, valid, sizes, 0, 5) == (3, 1)
+    assert contact_onset(tracks, 0, 5) == (3, 1)
     with pytest.raises(InputError):
-        contact_onset(states, valid, sizes, 0, 1)
+        contact_onset(tracks, 0, 1)
 
 
 @pytest.mark.slow

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from rasterize.tracks import Tracks
 from riskmap.sim.records.alternatives import ego_only_solution
 
 
@@ -15,7 +16,7 @@ def _stopped_car_close_ahead():
     states[:, :, 2] = 1.0
     states[0, :, 4] = 20.0
     states[1, :, 0] = 28.0
-    return states, np.ones((2, steps), bool), np.array([[5.0, 2.0], [5.0, 2.0]])
+    return Tracks(states, np.ones((2, steps), bool), np.array([[5.0, 2.0], [5.0, 2.0]]), np.zeros(2, np.int8))
 
 
 def _road(y_min: float, y_max: float):
@@ -25,23 +26,23 @@ def _road(y_min: float, y_max: float):
 
 
 def test_braking_alone_cannot_avoid_a_close_stopped_car():
-    states, valid, sizes = _stopped_car_close_ahead()
-    assert not ego_only_solution(states, valid, sizes, ego=0, collision_step=30, dt_s=0.1)
+    tracks = _stopped_car_close_ahead()
+    assert not ego_only_solution(tracks, ego=0, collision_step=30, dt_s=0.1)
 
 
 def test_moving_one_lane_over_avoids_it_where_that_lane_exists():
-    states, valid, sizes = _stopped_car_close_ahead()
-    assert ego_only_solution(states, valid, sizes, ego=0, collision_step=30, dt_s=0.1,
+    tracks = _stopped_car_close_ahead()
+    assert ego_only_solution(tracks, ego=0, collision_step=30, dt_s=0.1,
                              lateral_offsets_m=(4.0, -4.0), on_road=_road(-2.0, 6.0))
 
 
 def test_no_lateral_solution_on_a_one_lane_road():
-    states, valid, sizes = _stopped_car_close_ahead()
-    assert not ego_only_solution(states, valid, sizes, ego=0, collision_step=30, dt_s=0.1,
+    tracks = _stopped_car_close_ahead()
+    assert not ego_only_solution(tracks, ego=0, collision_step=30, dt_s=0.1,
                                  lateral_offsets_m=(4.0, -4.0), on_road=_road(-2.0, 2.0))
 
 
 def test_lateral_alternatives_need_a_road():
-    states, valid, sizes = _stopped_car_close_ahead()
+    tracks = _stopped_car_close_ahead()
     with pytest.raises(ValueError):
-        ego_only_solution(states, valid, sizes, ego=0, collision_step=30, dt_s=0.1, lateral_offsets_m=(4.0,))
+        ego_only_solution(tracks, ego=0, collision_step=30, dt_s=0.1, lateral_offsets_m=(4.0,))

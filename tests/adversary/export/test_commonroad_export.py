@@ -18,6 +18,7 @@ from adversary.crash.scene_sweep import RecordingSweep, record_scenes
 from adversary.crash.scenes import AttackScene, load_record, record_attack_scene
 from adversary.export.commonroad import OBSTACLE_ID_OFFSET, write_commonroad
 from rasterize.commonroad_compat import XMLFileReader, XMLFileWriter, region_contains
+from rasterize.tracks import Tracks
 from riskmap.registry import cached_planner
 from tests.adversary.conftest import exit_code
 
@@ -74,7 +75,9 @@ def _first_collision(ego: np.ndarray, ego_size, other: np.ndarray, other_size) -
     ego and adversary (states [T, 6]; a row is valid where it is finite): its first step."""
     states = np.stack([ego, other])
     valid = np.isfinite(states).all(axis=2)
-    step, _, _ = first_collision(np.nan_to_num(states), valid, np.array([ego_size, other_size], float), 0, [1])
+    sizes = np.array([ego_size, other_size], float)
+    tracks = Tracks(np.nan_to_num(states), valid, sizes, np.zeros(2, np.int8))
+    step, _, _ = first_collision(tracks, 0, [1])
     return step
 
 

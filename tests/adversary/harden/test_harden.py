@@ -14,6 +14,7 @@ from adversary.harden.dataset import ADVERSARIAL_GROUP, write_attack_shard, writ
 from adversary.harden.loop import HardenConfig, round_sidecar
 from adversary.harden.windows import attacked_drive, hardening_windows
 from rasterize.errors import InputError
+from rasterize.tracks import Tracks
 from riskmap.data.dataset import DemoDataset
 from riskmap.registry import cached_planner
 from riskmap.sim.records.alternatives import (
@@ -57,28 +58,28 @@ def test_the_human_fallback_goes_on_along_its_own_heading():
 def test_first_clear_alternative_tries_the_mildest_first():
     ego = _straight(10.0, 61)
     stopped = np.tile([40.0, 0.0, 1.0, 0.0, 0.0, 0.0], (61, 1))   # a car standing 40 m ahead
-    states, valid = np.stack([stopped, ego]), np.ones((2, 61), bool)
-    sizes = np.array([[5.0, 2.0], [5.0, 2.0]])
-    assert first_clear_alternative(states, valid, sizes, 1, 0, 60, DT, (0.0, 1.0)) is None
+    tracks = Tracks(np.stack([stopped, ego]), np.ones((2, 61), bool), np.array([[5.0, 2.0], [5.0, 2.0]]),
+                    np.zeros(2, np.int8))
+    assert first_clear_alternative(tracks, 1, 0, 60, DT, (0.0, 1.0)) is None
     # -2 m/s² stops the ego 25 m on, short of the car; -4 too, but -2 is tried first
-    assert first_clear_alternative(states, valid, sizes, 1, 0, 60, DT, (0.0, -2.0, -4.0)) == (-2.0, 0.0)
+    assert first_clear_alternative(tracks, 1, 0, 60, DT, (0.0, -2.0, -4.0)) == (-2.0, 0.0)
     with pytest.raises(ValueError, match="on_road"):
-        first_clear_alternative(states, valid, sizes, 1, 0, 60, DT, (0.0,), (3.5,))
+        first_clear_alternative(tracks, 1, 0, 60, DT, (0.0,), (3.5,))
     # the safest keeps the most room: the hardest braking stops furthest from the car
-    assert safest_clear_alternative(states, valid, sizes, 1, 0, 60, DT, (0.0, -2.0, -4.0)) == (-4.0, 0.0)
-    assert safest_clear_alternative(states, valid, sizes, 1, 0, 60, DT, (0.0, 1.0)) is None
+    assert safest_clear_alternative(tracks, 1, 0, 60, DT, (0.0, -2.0, -4.0)) == (-4.0, 0.0)
+    assert safest_clear_alternative(tracks, 1, 0, 60, DT, (0.0, 1.0)) is None
 
 
 def test_the_safest_alternative_weighs_the_car_behind_too():
     ego = _straight(10.0, 61)
     ahead = np.tile([40.0, 0.0, 1.0, 0.0, 0.0, 0.0], (61, 1))
     behind = _straight(10.0, 61) - [12.0, 0, 0, 0, 0, 0]     # follows at 12 m, never brakes
-    states, valid = np.stack([ahead, behind, ego]), np.ones((3, 61), bool)
-    sizes = np.full((3, 2), [5.0, 2.0])
+    tracks = Tracks(np.stack([ahead, behind, ego]), np.ones((3, 61), bool), np.full((3, 2), [5.0, 2.0]),
+                    np.zeros(3, np.int8))
     # -4 m/s² would be rear-ended by the follower; -2 stops in time ahead but is hit as well:
     # nothing along the path is clear, a lane change is (on an endless road)
-    assert safest_clear_alternative(states, valid, sizes, 2, 0, 60, DT, (-2.0, -4.0)) is None
-    found = safest_clear_alternative(states, valid, sizes, 2, 0, 60, DT, (0.0, -2.0), (3.5, -3.5),
+    assert safest_clear_alternative(tracks, 2, 0, 60, DT, (-2.0, -4.0)) is None
+    found = safest_clear_alternative(tracks, 2, 0, 60, DT, (0.0, -2.0), (3.5, -3.5),
                                      on_road=lambda *_: True)
     assert found is not None and found[1] in (3.5, -3.5)
 
@@ -142,8 +143,8 @@ def test_a_lateral_demonstration_changes_lane_where_it_can(rear_ended):
     assert info["demonstration"] == "alternative" and abs(info["offset_m"]) > 3.0
     # once the lane change has blended in (2 s), the demonstrated ego is a lane width from the
     # attacked drive's path
-    states, valid, _, others = attacked_drive(record, attack, cached_planner("replay"), "replay")
-    path = states[len(others)][valid[len(others)], :2]
+    tracks, others = attacked_drive(record, attack, cached_planner("replay"), "replay")
+    path = tracks.states[len(others)][tracks.valid[len(others)], :2]
     late = [i for i, k in enumerate(info["steps"]) if k >= info["start_step"] + 20]
     assert late
     window = made.scenes[late[0]]

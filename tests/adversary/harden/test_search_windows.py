@@ -26,7 +26,8 @@ def test_a_cut_in_the_ego_drove_into_becomes_windows_that_brake_clear_of_it():
     # 8 m ahead, 4 m/s slower, cutting in at 3 s and braking: a constant-velocity ego hits it
     values = _cut_in(gap_m=8.0, rel_speed_mps=-4.0, manoeuvre_time_s=3.0, brake_mps2=4.0)
     _, recorder = _drive(CV_CUT_IN, values)
-    states, valid, sizes, _ = recorder.arrays()
+    tracks = recorder.tracks()
+    states, valid, sizes = tracks.states, tracks.valid, tracks.sizes
     ego = recorder.ego_id
     target = 1 - ego
 

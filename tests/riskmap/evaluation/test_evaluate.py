@@ -24,8 +24,8 @@ def _drive_in_log(planner, log, replay_ego):
     env = make_env(ENV)
     run = LogReplayEpisode(env, ENV, 11, 0, log, 10, replay_ego=replay_ego)
     drive_episode(env, planner, DriveConfig(ENV, 1, seed=11, episode_s=3.0), 0, run=run)
-    states, valid, sizes, _ = run.recorder.arrays()
-    return run, states[: len(sizes)], valid[: len(sizes)]
+    tracks = run.recorder.tracks()
+    return run, tracks.states[: tracks.num_agents], tracks.valid[: tracks.num_agents]
 
 
 @pytest.mark.slow
@@ -121,7 +121,8 @@ def test_log_replay_keeps_agent_ids():
     log = record_human_episode(env, "highway-v0", 3, 0, 10, 4.0)
     run = LogReplayEpisode(env, "highway-v0", 3, 0, log, 10)
     drive_episode(env, make_planner("cv"), DriveConfig("highway-v0", 1, seed=3, episode_s=3.0), 0, run=run)
-    states, valid, _, _ = run.recorder.arrays()
+    tracks = run.recorder.tracks()
+    states, valid = tracks.states, tracks.valid
     ids = run.log_ids()
     assert ids[run.recorder.ego_id] == log.ego_id
     replayed = [a for a in range(len(ids)) if ids[a] >= 0 and a != run.recorder.ego_id]

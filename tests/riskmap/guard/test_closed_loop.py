@@ -62,7 +62,7 @@ class UrgentPredictor:
 
     alert_threshold = 0.6
 
-    def score(self, states, valid, sizes, kinds, ego, neighbours, last_step, segment_steps):
+    def score(self, tracks, ego, neighbours, last_step, segment_steps):
         n = len(neighbours)
         return np.full(n, 0.99), np.full(n, 0.5)
 

@@ -2,6 +2,7 @@ import numpy as np
 import pytest
 
 from rasterize.errors import InputError
+from rasterize.tracks import Tracks
 from riskmap.guard.dataset import (
     GuardCollectConfig,
     extract_windows,
@@ -41,13 +42,12 @@ def _recording(crash_step=25, far=False):
     if far:
         states[3, :, 0], states[3, :, 1], states[3, :, 4] = 10.0 * t, -60.0, 10.0
     valid = np.ones((n_agents, n_steps), bool)
-    return states, valid, np.array([CAR] * n_agents), np.zeros(n_agents, np.int8)
+    return Tracks(states, valid, np.array([CAR] * n_agents), np.zeros(n_agents, np.int8))
 
 
 def _extract(crashed=True, negatives=100, **kw):
-    states, valid, sizes, kinds = _recording(**kw)
     config = GuardCollectConfig(control_hz=HZ, negatives_per_episode=negatives)
-    return extract_windows(states, valid, sizes, kinds, 0, crashed, config, np.random.default_rng(0))
+    return extract_windows(_recording(**kw), 0, crashed, config, np.random.default_rng(0))
 
 
 def _positive(w):
@@ -101,8 +101,7 @@ def reference_ttc(w, crash):
 
 
 def test_window_edges_are_d_s_and_relative_motion_at_half_second_segments():
-    states, valid, sizes, kinds = _recording()
-    node_u, node_i, edge, mask = window_features(states, valid, sizes, kinds, 0, 1, 24, 5)
+    node_u, node_i, edge, mask = window_features(_recording(), 0, 1, 24, 5)
     assert edge.shape == (OBSERVED, EDGE_DIM) and EDGE_DIM == 5
     # events at steps -1 (absent), 4, 9, 14, 19, 24: ego at x = step m, d_s = 30 − x − 5
     assert mask.tolist() == [False] + [True] * (OBSERVED - 1)
@@ -158,11 +157,10 @@ def test_no_crash_no_positive_and_no_window_without_a_known_future():
 
 def test_negatives_are_capped_half_nearest():
     rng = np.random.default_rng(0)
-    states, valid, sizes, kinds = _recording(crash_step=45)
-    every = extract_windows(states, valid, sizes, kinds, 0, True,
+    tracks = _recording(crash_step=45)
+    every = extract_windows(tracks, 0, True,
                             GuardCollectConfig(control_hz=HZ, negatives_per_episode=100), rng)
-    w = extract_windows(states, valid, sizes, kinds, 0, True,
-                        GuardCollectConfig(control_hz=HZ, negatives_per_episode=2), rng)
+    w = extract_windows(tracks, 0, True, GuardCollectConfig(control_hz=HZ, negatives_per_episode=2), rng)
     assert (~_positive(w)).sum() == 2 and _positive(w).sum() == 30
     # one of the two kept is the nearest candidate by d_s at its last event
     neg = ~_positive(every)
@@ -186,21 +184,21 @@ def _reference_ds(states, sizes, ego, agent, step):
 
 def test_decision_frames_score_the_two_nearest_every_half_second():
     crash = 45
-    states, valid, sizes, kinds = _recording(crash_step=crash, far=True)
+    tracks = _recording(crash_step=crash, far=True)
     config = GuardCollectConfig(control_hz=HZ, negatives_per_episode=100)
-    w = extract_windows(states, valid, sizes, kinds, 0, True, config, np.random.default_rng(0))
+    w = extract_windows(tracks, 0, True, config, np.random.default_rng(0))
     n_steps = crash + 1
     frame_steps = list(range(5, n_steps, 5))
     assert w["frames"].tolist() == [len(frame_steps)] == [9]
     np.testing.assert_array_equal(w["frame"], np.repeat(np.arange(9), 2))
     assert w["frame_node_u"].shape == (18, NODE_DIM) and w["frame_edge"].shape == (18, OBSERVED, EDGE_DIM)
     for f, k in enumerate(frame_steps):
-        ds = {a: _reference_ds(states, sizes, 0, a, k) for a in (1, 2, 3)}
+        ds = {a: _reference_ds(tracks.states, tracks.sizes, 0, a, k) for a in (1, 2, 3)}
         expected = sorted(ds, key=ds.get)[:2]
         assert 3 not in expected
         for slot, agent in enumerate(expected):
             row = 2 * f + slot
-            ref = window_features(states, valid, sizes, kinds, 0, agent, k, 5)
+            ref = window_features(tracks, 0, agent, k, 5)
             np.testing.assert_array_equal(w["frame_node_i"][row], ref[1])
             np.testing.assert_array_equal(w["frame_edge"][row], ref[2])
             np.testing.assert_array_equal(w["frame_mask"][row], ref[3])

@@ -3,6 +3,7 @@ import pytest
 
 from rasterize.frames import box_corners
 from rasterize.geometry import box_gap, boxes_overlap
+from rasterize.tracks import Tracks
 from riskmap.guard.events import projected_separation, scene_separations
 
 CAR = np.array([5.0, 2.0])  # length, width (m)
@@ -60,7 +61,7 @@ def test_scene_separations_marks_absent_agents_inf():
     states[2, :, 1] = 4.0
     valid = np.ones((3, 2), bool)
     valid[2, 0] = False
-    out = scene_separations(states, valid, np.tile(CAR, (3, 1)), ego=0)
+    out = scene_separations(Tracks(states, valid, np.tile(CAR, (3, 1)), np.zeros(3, np.int8)), ego=0)
     assert out.shape == (3, 2)
     assert np.isinf(out[0]).all() and np.isinf(out[2, 0])
     assert out[1, 1] == pytest.approx(5.0) and out[2, 1] == pytest.approx(2.0)

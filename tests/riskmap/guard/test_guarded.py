@@ -43,7 +43,7 @@ class FixedPredictor:
     def _of(self, value, neighbours):
         return np.array([value[i] if isinstance(value, dict) else value for i in neighbours], dtype=np.float64)
 
-    def score(self, states, valid, sizes, kinds, ego, neighbours, last_step, segment_steps):
+    def score(self, tracks, ego, neighbours, last_step, segment_steps):
         self.calls.append((list(neighbours), last_step, segment_steps))
         return self._of(self.value, neighbours), self._of(self.ttc, neighbours)
 
@@ -324,6 +324,7 @@ def _fresh_checkpoint(path, horizon_s=1.0, threshold=0.37):
 def test_predictor_loads_the_sidecars_threshold_and_scores_probabilities_and_ttc(tmp_path):
     import torch
 
+    from rasterize.tracks import Tracks
     from riskmap.guard.features import window_features
     from riskmap.guard.predictor import AccidentPredictor
 
@@ -331,15 +332,16 @@ def test_predictor_loads_the_sidecars_threshold_and_scores_probabilities_and_ttc
     predictor = AccidentPredictor.load(tmp_path / "ck")
     assert predictor.alert_threshold == 0.37 and predictor.model.config.horizon_s == 1.0
     scene = scene_with(ego_speed=12.0, other_xy=(20.0, 0.0), more=[(0.0, 10.0)])
-    probs, ttc = predictor.score(scene.states, scene.valid, scene.sizes, scene.kinds, 0, [1, 2], 5, 1)
+    tracks = Tracks(scene.states, scene.valid, scene.sizes, scene.kinds)
+    probs, ttc = predictor.score(tracks, 0, [1, 2], 5, 1)
     assert probs.shape == ttc.shape == (2,) and probs.dtype == ttc.dtype == np.float64
     assert ((probs > 0) & (probs < 1)).all() and (ttc >= 0).all()
-    parts = [window_features(scene.states, scene.valid, scene.sizes, scene.kinds, 0, i, 5, 1) for i in (1, 2)]
+    parts = [window_features(tracks, 0, i, 5, 1) for i in (1, 2)]
     with torch.no_grad():
         logits, ref_ttc = model.eval()(*(torch.from_numpy(np.stack([p[k] for p in parts])) for k in range(4)))
     np.testing.assert_allclose(probs, 1.0 / (1.0 + np.exp(-logits.double().numpy())), rtol=1e-6)
     np.testing.assert_allclose(ttc, ref_ttc.double().numpy(), rtol=1e-6)
-    empty = predictor.score(scene.states, scene.valid, scene.sizes, scene.kinds, 0, [], 5, 1)
+    empty = predictor.score(tracks, 0, [], 5, 1)
     assert len(empty) == 2 and empty[0].shape == empty[1].shape == (0,)
 
 

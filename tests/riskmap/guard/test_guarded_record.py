@@ -39,7 +39,8 @@ class NearPredictor:
     def __init__(self):
         self.seen = []
 
-    def score(self, states, valid, sizes, kinds, ego, neighbours, last_step, segment_steps):
+    def score(self, tracks, ego, neighbours, last_step, segment_steps):
+        states, valid = tracks.states, tracks.valid
         self.seen.append(round(float(np.where(valid[..., None], states, 0.0).sum()), 6))
         d = np.array([np.linalg.norm(states[i, last_step, :2] - states[ego, last_step, :2])
                       for i in neighbours])

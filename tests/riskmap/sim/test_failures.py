@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from rasterize.tracks import Tracks
 from riskmap.sim.records import failures
 from riskmap.sim.records.failures import (
     MAX_LANES_PER_S,
@@ -47,9 +48,10 @@ def first_overlap(states: np.ndarray, a: int, b: int) -> int:
     raise AssertionError("no collision in the hand-built scene")
 
 
-def scene(*tracks_: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def scene(*tracks_: np.ndarray) -> Tracks:
     states = np.stack(tracks_)
-    return states, np.ones(states.shape[:2], bool), np.tile(SIZE, (len(tracks_), 1))
+    return Tracks(states, np.ones(states.shape[:2], bool), np.tile(SIZE, (len(tracks_), 1)),
+                  np.zeros(len(tracks_), np.int8))
 
 
 def smoothstep(u: np.ndarray) -> np.ndarray:
@@ -61,9 +63,9 @@ def test_rear_end_by_a_follower_that_could_not_stop_is_struck_from_behind_and_un
     steps = 40
     ego = track(np.full(steps, 50.0), np.zeros(steps))                 # waiting in a queue
     follower = track(15.0 + 20.0 * DT * np.arange(steps), np.zeros(steps))
-    states, valid, sizes = scene(ego, follower)
-    k = first_overlap(states, 0, 1)
-    out = classify_failure(states, valid, sizes, 0, 1, k, DT)
+    tracks = scene(ego, follower)
+    k = first_overlap(tracks.states, 0, 1)
+    out = classify_failure(tracks, 0, 1, k, DT)
     assert out["fault"] == "struck from behind"
     assert out["avoidable"] is False and out["avoidance"] is None
     assert out["counts"] is False
@@ -75,9 +77,9 @@ def test_a_cut_in_the_ego_could_have_braked_for_is_at_fault_and_avoidable():
     ego = track(20.0 * t, np.zeros(steps))                               # keeps 20 m/s, never brakes
     # A slower car 30 m ahead moves into the ego's lane over 2 s; the ego holds its speed.
     cutter = track(30.0 + 12.0 * t, LANE * (1.0 - smoothstep((t - 0.5) / 2.0)))
-    states, valid, sizes = scene(ego, cutter)
-    k = first_overlap(states, 0, 1)
-    out = classify_failure(states, valid, sizes, 0, 1, k, DT, attack=True, lane_width_m=LANE)
+    tracks = scene(ego, cutter)
+    k = first_overlap(tracks.states, 0, 1)
+    out = classify_failure(tracks, 0, 1, k, DT, attack=True, lane_width_m=LANE)
     assert out["fault"] == "at fault"
     assert out["avoidable"] is True and out["avoidance"]["accel_mps2"] < 0      # braking avoids it
     assert out["visible_time_s"] < k * DT - failures.REACTION_S
@@ -90,11 +92,11 @@ def test_the_threat_is_visible_only_as_late_as_constant_velocity_predicts_it():
     t = DT * np.arange(steps)
     ego = track(20.0 * t, np.zeros(steps))
     leader = track(braking_x(50.0, 20.0, 8.0, steps, start_s=3.0), np.zeros(steps))   # 45 m gap, then brakes
-    states, valid, sizes = scene(ego, leader)
-    k = first_overlap(states, 0, 1)
-    visible = threat_visible_step(states, valid, sizes, 0, 1, k)
+    tracks = scene(ego, leader)
+    k = first_overlap(tracks.states, 0, 1)
+    visible = threat_visible_step(tracks, 0, 1, k)
     assert 30 < visible < k             # not before the leader brakes (equal speeds never meet)
-    assert classify_failure(states, valid, sizes, 0, 1, k, DT)["avoidable"] is True
+    assert classify_failure(tracks, 0, 1, k, DT)["avoidable"] is True
 
 
 def test_a_leader_that_brakes_hard_in_a_short_gap_is_unavoidable_for_a_driver_who_must_see_it_first():
@@ -102,14 +104,14 @@ def test_a_leader_that_brakes_hard_in_a_short_gap_is_unavoidable_for_a_driver_wh
     t = DT * np.arange(steps)
     ego = track(20.0 * t, np.zeros(steps))                      # 15 m behind at equal speed
     leader = track(braking_x(20.0, 20.0, 6.0, steps, start_s=2.5), np.zeros(steps))
-    states, valid, sizes = scene(ego, leader)
-    k = first_overlap(states, 0, 1)
-    out = classify_failure(states, valid, sizes, 0, 1, k, DT)
+    tracks = scene(ego, leader)
+    k = first_overlap(tracks.states, 0, 1)
+    out = classify_failure(tracks, 0, 1, k, DT)
     assert out["fault"] == "at fault" and out["avoidable"] is False
     # STRIVE's hindsight check, 3 s before the collision whatever the ego could see, finds a way.
     from riskmap.sim.records.alternatives import ego_only_solution
 
-    assert ego_only_solution(states, valid, sizes, 0, k, DT)
+    assert ego_only_solution(tracks, 0, k, DT)
 
 
 def test_a_threat_that_appears_at_the_collision_leaves_no_time():
@@ -118,9 +120,9 @@ def test_a_threat_that_appears_at_the_collision_leaves_no_time():
     ego = track(20.0 * t, np.zeros(steps))
     dive = 2 * LANE * (1.0 - smoothstep((t - 2.0) / 0.8))     # across two lanes in 0.8 s, 3 m ahead
     other = track(20.0 * t + 3.0, dive)
-    states, valid, sizes = scene(ego, other)
-    k = first_overlap(states, 0, 1)
-    out = classify_failure(states, valid, sizes, 0, 1, k, DT, attack=True, lane_width_m=LANE)
+    tracks = scene(ego, other)
+    k = first_overlap(tracks.states, 0, 1)
+    out = classify_failure(tracks, 0, 1, k, DT, attack=True, lane_width_m=LANE)
     assert out["avoidable"] is False
     assert "MAX_LANES_PER_S" in out["invalid_reasons"] and out["valid_attack"] is False
 
@@ -130,9 +132,9 @@ def test_a_sideswipe_from_the_next_lane_is_a_side_contact():
     t = DT * np.arange(steps)
     ego = track(20.0 * t, np.zeros(steps))
     other = track(20.0 * t + 1.0, LANE * (1.0 - 0.7 * smoothstep((t - 0.5) / 2.0)))
-    states, valid, sizes = scene(ego, other)
-    k = first_overlap(states, 0, 1)
-    assert collision_fault(states[0, k], states[1, k]) == "side"
+    tracks = scene(ego, other)
+    k = first_overlap(tracks.states, 0, 1)
+    assert collision_fault(tracks.states[0, k], tracks.states[1, k]) == "side"
 
 
 def test_an_adversary_that_hits_another_agent_first_is_not_a_valid_attack():
@@ -142,9 +144,9 @@ def test_an_adversary_that_hits_another_agent_first_is_not_a_valid_attack():
     adversary_y = LANE * 2 * (1.0 - smoothstep((t - 0.5) / 3.0))      # across two lanes in 3 s
     adversary = track(18.0 * t + 8.0, adversary_y)
     bystander = track(20.0 * t + 8.3, np.full(steps, LANE))       # in the middle lane beside it
-    states, valid, sizes = scene(ego, adversary, bystander)
-    k = first_overlap(states, 0, 1)
-    out = attack_validity(states, valid, sizes, 0, 1, k, DT, LANE)
+    tracks = scene(ego, adversary, bystander)
+    k = first_overlap(tracks.states, 0, 1)
+    out = attack_validity(tracks, 0, 1, k, DT, LANE)
     assert out["hit_agents"] == [2]
     assert "hit another agent" in out["reasons"] and not out["valid"]
 
@@ -178,8 +180,8 @@ def test_the_explanation_says_the_class_and_the_way_out():
     t = DT * np.arange(steps)
     ego = track(20.0 * t, np.zeros(steps))
     cutter = track(30.0 + 12.0 * t, LANE * (1.0 - smoothstep((t - 0.5) / 2.0)))
-    states, valid, sizes = scene(ego, cutter)
-    out = classify_failure(states, valid, sizes, 0, 1, first_overlap(states, 0, 1), DT, attack=True,
+    tracks = scene(ego, cutter)
+    out = classify_failure(tracks, 0, 1, first_overlap(tracks.states, 0, 1), DT, attack=True,
                            lane_width_m=LANE)
     text = failure_explanation(out)
     assert text.startswith("It counts as a failure of the planner: the other vehicle was ahead")
@@ -196,9 +198,9 @@ def test_a_crash_flag_without_overlap_finds_the_nearest_box_at_the_last_step():
     ego = track(20.0 * t, np.zeros(steps))
     ahead = track(20.0 * t + 5.8, np.zeros(steps))        # 0.8 m gap: highway-env may flag it
     far = track(20.0 * t + 40.0, np.zeros(steps))
-    states, valid, sizes = scene(ego, ahead, far)
-    assert first_contact(states, valid, sizes, 0) is None
-    assert first_contact(states, valid, sizes, 0, crash_flagged=True) == (steps - 1, 1)
+    tracks = scene(ego, ahead, far)
+    assert first_contact(tracks, 0) is None
+    assert first_contact(tracks, 0, crash_flagged=True) == (steps - 1, 1)
 
 
 def test_a_highway_env_lane_change_is_valid_under_the_simulators_limits_only():

@@ -50,9 +50,9 @@ def _drive(env_id: str, fast: bool, planner, seed: int, episode: int, seconds: f
     hooks = DriveHooks(on_ready=on_ready, on_step=lambda w: states.append(_road_state(w)),
                        on_plan=lambda w, scene, plan, k: scenes.append(scene))
     loop = drive_world(run, planner, LoopConfig(round(seconds * 10), 5), hooks)
-    recorded_states, valid, sizes, kinds = run.recorder.arrays()
+    recorded = run.recorder.tracks()
     crashes = [[v.crashed for v in run.base.road.vehicles]]
-    return {"states": states, "recorded": (recorded_states, valid, sizes, kinds),
+    return {"states": states, "recorded": (recorded.states, recorded.valid, recorded.sizes, recorded.kinds),
             "routes": [run.recorder.route_at(k) for k in range(run.recorder.num_steps)],
             "scenes": scenes, "gaps": loop.gaps, "speeds": loop.speeds, "distance": loop.distance_m,
             "crashed": run.crashed, "off_network": run.off_network, "others_crashed": crashes,
