@@ -109,8 +109,20 @@ class Signal:
         return bool(self.red[max(0, int(np.searchsorted(self.times_s, t_s, side="right")) - 1)])
 
 
+class AgentsOverSteps:
+    """`num_agents` and `num_steps` of a holder of `states` [A, S, ...] (a scene, tracks)."""
+
+    @property
+    def num_agents(self) -> int:
+        return self.states.shape[0]
+
+    @property
+    def num_steps(self) -> int:
+        return self.states.shape[1]
+
+
 @dataclass(frozen=True, eq=False)
-class Scene:
+class Scene(AgentsOverSteps):
     """One moment of one episode (see the module docstring for shapes and units)."""
 
     states: np.ndarray
@@ -185,14 +197,6 @@ class Scene:
             if ids.shape != (n,) or not np.issubdtype(ids.dtype, np.integer):
                 raise InputError(f"Scene.agent_ids must be integers [{n}], got {ids.dtype} {ids.shape}")
             object.__setattr__(self, "agent_ids", ids.astype(np.int64))
-
-    @property
-    def num_agents(self) -> int:
-        return self.states.shape[0]
-
-    @property
-    def num_steps(self) -> int:
-        return self.states.shape[1]
 
     @property
     def num_future_steps(self) -> int:

@@ -16,11 +16,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from rasterize.scene import STATE_DIM
+from rasterize.scene import STATE_DIM, AgentsOverSteps
 
 
 @dataclass(frozen=True, eq=False)
-class Tracks:
+class Tracks(AgentsOverSteps):
     """A recorded rollout (module docstring). Arrays are held as given, not copied."""
 
     states: np.ndarray      # [A, S, 6] (x, y, heading_x, heading_y, speed, yaw_rate)
@@ -48,13 +48,6 @@ class Tracks:
         """A `rasterize.scene.Scene`'s agents over its steps (ids: its `agent_ids`)."""
         return cls(scene.states, scene.valid, scene.sizes, scene.kinds, scene.agent_ids)
 
-    @property
-    def num_agents(self) -> int:
-        return self.states.shape[0]
-
-    @property
-    def num_steps(self) -> int:
-        return self.states.shape[1]
 
 
 class ReadsTracks:

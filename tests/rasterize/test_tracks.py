@@ -39,15 +39,13 @@ def test_a_mismatched_field_is_named(field, value):
 
 
 def _old_arrays(recorder: TrafficRecorder):
-    """What `TrafficRecorder.arrays()` returned, written out as it was."""
-    n_agents, n_steps = len(recorder._sizes), recorder.num_steps
-    states = np.zeros((n_agents, n_steps, STATE_DIM))
-    valid = np.zeros((n_agents, n_steps), dtype=bool)
-    for step, agent, state in recorder._rows:
-        states[agent, step] = state
-        valid[agent, step] = True
-    sizes = np.asarray(recorder._sizes).reshape(-1, 2)
-    return states, valid, sizes, np.asarray(recorder._kinds, dtype=np.int8)
+    """What `TrafficRecorder.arrays()` returned, built here by fancy indexing over its rows."""
+    steps, agents, rows = zip(*recorder._rows)
+    states = np.zeros((len(recorder._sizes), recorder.num_steps, STATE_DIM))
+    states[list(agents), list(steps)] = np.array(rows)
+    valid = np.zeros(states.shape[:2], dtype=bool)
+    valid[list(agents), list(steps)] = True
+    return states, valid, np.array(recorder._sizes, dtype=float).reshape(-1, 2), np.array(recorder._kinds, np.int8)
 
 
 def test_the_recorder_gives_its_record_as_tracks():
