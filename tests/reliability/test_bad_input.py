@@ -291,6 +291,10 @@ class Fixtures:
             content = json.loads(sidecar.read_text())
             content["kind"] = None
             sidecar.write_text(json.dumps(content))
+        elif variant == "newer_format":           # written by a later toolkit
+            content = json.loads(sidecar.read_text())
+            content["format_version"] = 99
+            sidecar.write_text(json.dumps(content))
         elif variant.startswith("without_"):     # without_model, without_irl.horizon: a part left out
             content = json.loads(sidecar.read_text())
             *parents, name = variant.removeprefix("without_").split(".")
@@ -780,6 +784,7 @@ add(
     drive_row("ck-traffic-kind", ("--checkpoint", ck(TRAFFIC_SRC)), S(ck(TRAFFIC_SRC))),
     drive_row("ck-no-kind", ("--checkpoint", ck(RM_SRC, "no_kind")), S(ck(RM_SRC, "no_kind"))),
     drive_row("ck-null-kind", ("--checkpoint", ck(RM_SRC, "null_kind")), S(ck(RM_SRC, "null_kind"))),
+    drive_row("ck-newer-format", ("--checkpoint", ck(RM_SRC, "newer_format")), S("version 99, newer")),
     drive_row("ck-truncated-weights", ("--checkpoint", ck(RM_SRC, "half_weights")), S(ck(RM_SRC, "half_weights"))),
     drive_row("ck-empty-weights", ("--checkpoint", ck(RM_SRC, "empty_weights")), S(ck(RM_SRC, "empty_weights"))),
     drive_row("ck-png-weights", ("--checkpoint", ck(RM_SRC, "png_weights")), S(ck(RM_SRC, "png_weights"))),

@@ -27,7 +27,7 @@ def test_the_reader_leaves_the_callers_dict_alone():
     assert data == {"x": 0}
 
 
-@pytest.mark.parametrize("version, words", [(3, "newer than this toolkit reads (2); upgrade"),
+@pytest.mark.parametrize("version, words", [(3, "newer than this toolkit reads (2); install"),
                                             (-1, "not a version"), ("1", "not a version"),
                                             (True, "not a version")])
 def test_a_version_this_toolkit_cannot_read_is_one_line(version, words):
