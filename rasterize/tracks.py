@@ -49,7 +49,6 @@ class Tracks(AgentsOverSteps):
         return cls(scene.states, scene.valid, scene.sizes, scene.kinds, scene.agent_ids)
 
 
-
 class ReadsTracks:
     """For holders whose `tracks` field keeps a rollout's arrays (a CRASH rollout, an attacked run):
     `holder.states`, `.valid`, `.sizes`, `.kinds` and `.log_ids` (the tracks' ids) read the tracks'

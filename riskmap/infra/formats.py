@@ -44,8 +44,8 @@ class Format:
                              f"version of a {self.name}; write it again with this toolkit")
         if found > self.version:
             raise InputError(f"{where or 'the ' + self.name} is a {self.name} of version {found}, "
-                             f"newer than this toolkit reads ({self.version}); install the toolkit version that "
-                             "wrote it, or pass a file this one wrote")
+                             f"newer than this toolkit reads ({self.version}); install the toolkit "
+                             "version that wrote it, or pass a file this one wrote")
         out = dict(data)
         for upgrade in self.upgrades[found:]:
             out = upgrade(out)
