@@ -21,7 +21,7 @@ from rasterize.errors import InputError
 from rasterize.maps import goal_map, motion_features, route_goal_cell, start_cell, uncertainty_map
 from rasterize.raster import rasterize_scene
 from rasterize.scene import Scene
-from rasterize.spacetime import quantised, step_evidence
+from rasterize.spacetime import predicted_footprints, quantised, step_evidence
 from riskmap.infra.checkpoint import require_sections, route_settings_of
 from riskmap.planner.irl import goal_log_map
 from riskmap.planner.st_model import SpaceTimeConfig, load_spacetime_model
@@ -40,16 +40,23 @@ class TimeGapConfig:
     cells another agent is predicted to cover within the `time_gap_s` seconds up to step t (its
     footprints at steps t − k … t, k = time_gap_s / step; step 0 is now) cost `weight` × that
     footprint at step t. Being where a car was 1 s earlier is a 1 s time gap, so this keeps a
-    headway behind a leader and a margin behind a car clearing a crossing. Off (weight 0) unless a
-    checkpoint's sidecar `planning.time_gap` names it (measured in experiments/README.md)."""
+    headway behind a leader and a margin behind a car clearing a crossing. `ahead_only` prices
+    only the agents whose centre is ahead of the ego's now (ego-frame x ≥ 0): a follower's
+    predicted footprints cover the ego's own cells, and pricing them pushes a waiting ego forward.
+    Off (weight 0) unless a checkpoint's sidecar `planning.time_gap` names it (measured in
+    experiments/README.md)."""
 
     time_gap_s: float = 1.0
     weight: float = 0.0
+    ahead_only: bool = False
 
     def __post_init__(self) -> None:
         if not (0.0 <= self.time_gap_s <= 6.0 and 0.0 <= self.weight < float("inf")):
             raise InputError(f"planning time_gap {self}: time_gap_s must be 0 … 6 s and weight "
                              ">= 0; fix the sidecar's planning.time_gap")
+        if not isinstance(self.ahead_only, bool):
+            raise InputError(f"planning time_gap ahead_only {self.ahead_only!r} must be true or false; "
+                             "fix the sidecar's planning.time_gap")
 
     def penalty(self, now: np.ndarray, predicted: np.ndarray, step_s: float) -> np.ndarray:
         """[T, G, G] to subtract from r_1 … r_T: `now` [G, G] and `predicted` [T, G, G] in [0, 1]."""
@@ -96,6 +103,20 @@ class ReachConfig:
         tol = self.tolerance_cells * grid.extent.length_m / grid.rows
         outside = (x[None] > hi + tol) | (x[None] < lo - tol)
         return self.weight * outside.astype(np.float32)
+
+
+def without_agents_behind(scene: Scene) -> Scene:
+    """`scene` with the other agents whose centre is behind the ego's now (ego-frame x < 0)
+    marked absent at every step."""
+    from dataclasses import replace
+
+    from rasterize.frames import ego_from_world, ego_pose
+
+    origin, heading = ego_pose(scene)
+    x = ego_from_world(scene.states[:, scene.current_index, :2], origin, heading)[:, 0]
+    keep = x >= 0.0
+    keep[scene.ego_index] = True
+    return replace(scene, valid=scene.valid & keep[:, None])
 
 
 class SpaceTimePlanner:
@@ -153,9 +174,9 @@ class SpaceTimePlanner:
             planner.route_goal_weight = 1.0
         settings = side.get("planning", {}).get("time_gap")
         if settings is not None:
-            if not isinstance(settings, dict) or set(settings) - {"time_gap_s", "weight"}:
+            if not isinstance(settings, dict) or set(settings) - {"time_gap_s", "weight", "ahead_only"}:
                 raise InputError(f"the sidecar's planning.time_gap {settings!r} is not a mapping of "
-                                 "time_gap_s, weight; fix or remove it")
+                                 "time_gap_s, weight[, ahead_only]; fix or remove it")
             planner.time_gap = TimeGapConfig(**settings)
         settings = side.get("planning", {}).get("reach")
         if settings is not None:
@@ -194,8 +215,14 @@ class SpaceTimePlanner:
                 g = g + self.route_goal_weight * goal_log_map(
                     torch.tensor([goal_cell]), self.grid.rows, self.grid.cols, self.goal_variance)
             if self.time_gap.weight > 0:
-                now = quantised(uncertainty_map(scene, self.grid, self.sigma_x, self.sigma_y))
-                penalty = self.time_gap.penalty(now.astype(np.float32) / 255.0, evidence[:, 0], st.step_s)
+                priced, predicted = scene, evidence[:, 0]
+                if self.time_gap.ahead_only:
+                    priced = without_agents_behind(scene)
+                    footprints = predicted_footprints(priced, self.grid, st.steps, st.step_s,
+                                                      self.sigma_x, self.sigma_y)
+                    predicted = quantised(footprints).astype(np.float32) / 255.0
+                now = quantised(uncertainty_map(priced, self.grid, self.sigma_x, self.sigma_y))
+                penalty = self.time_gap.penalty(now.astype(np.float32) / 255.0, predicted, st.step_s)
                 reward = reward - torch.from_numpy(penalty)[None]
             if self.reach.weight > 0:
                 penalty = self.reach.penalty(scene.ego_state()[4], self.grid, st.steps, st.step_s)

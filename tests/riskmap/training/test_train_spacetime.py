@@ -98,6 +98,44 @@ def test_planning_settings_come_from_the_sidecar_and_bad_ones_are_named(st_check
     assert load_planner(copy, goal_variance=0.25).route_goal_weight == 0.5   # the sidecar's kept
 
 
+def test_a_time_gap_for_agents_ahead_only_prices_no_follower(st_checkpoint, tiny_dataset, tmp_path):
+    """`planning.time_gap.ahead_only`: the time gap is computed from the agents ahead of the ego
+    alone, so the plan differs from pricing every agent exactly when an agent is behind."""
+    import shutil
+
+    from rasterize.frames import ego_from_world, ego_pose
+    from rasterize.maps import uncertainty_map
+    from rasterize.spacetime import predicted_footprints
+    from riskmap.planner.st_planner import without_agents_behind
+
+    side = json.loads(st_checkpoint.with_suffix(".json").read_text())
+    plans = {}
+    for ahead_only in (False, True):
+        copy = tmp_path / f"ck_{ahead_only}"
+        shutil.copy(st_checkpoint.with_suffix(".safetensors"), copy.with_suffix(".safetensors"))
+        side["planning"] = {"time_gap": {"time_gap_s": 1.0, "weight": 1000.0, "ahead_only": ahead_only}}
+        copy.with_suffix(".json").write_text(json.dumps(side))
+        planner = load_planner(copy, seed=1)
+        assert planner.time_gap.ahead_only is ahead_only
+        plans[ahead_only] = [planner.plan(DemoDataset(tiny_dataset).scene(i)) for i in range(4)]
+    seen_behind = 0
+    for i in range(4):
+        scene = DemoDataset(tiny_dataset).scene(i).past()
+        kept = without_agents_behind(scene)
+        assert kept.valid[scene.ego_index].any()
+        now = scene.current_index
+        x = [ego_from_world(scene.states[a, now, :2], *ego_pose(scene))[0]
+             for a in np.flatnonzero(scene.valid[:, now] & ~kept.valid[:, now])]
+        assert all(v < 0 for v in x)
+        maps = [(uncertainty_map(s, planner.grid), predicted_footprints(s, planner.grid, 12, 0.5))
+                for s in (scene, kept)]
+        priced_differently = any(not np.array_equal(a, b) for a, b in zip(*maps))
+        seen_behind += priced_differently
+        same = np.array_equal(plans[False][i].risk_steps, plans[True][i].risk_steps)
+        assert same != priced_differently, f"scene {i}: a follower on the grid {priced_differently}"
+    assert seen_behind > 0
+
+
 def test_a_given_goal_variance_plans_towards_the_given_goal(st_checkpoint, tiny_dataset):
     """--goal-variance (as with evaluate --goal human): the pull towards the scene's goal is on,
     so the plan's terminal visitation sits nearer that goal than without it."""
@@ -120,7 +158,7 @@ def test_bad_planning_settings_are_named(st_checkpoint, tmp_path):
     copy = tmp_path / "ck"
     shutil.copy(st_checkpoint.with_suffix(".safetensors"), copy.with_suffix(".safetensors"))
     for bad in ({"route_goal_weight": -1}, {"time_gap": {"gap": 1}}, {"reach": {"speed": 1}},
-                {"reach": {"accel_mps2": 0.0, "weight": 1.0}}):
+                {"reach": {"accel_mps2": 0.0, "weight": 1.0}}, {"time_gap": {"ahead_only": "yes"}}):
         side["planning"] = bad
         copy.with_suffix(".json").write_text(json.dumps(side))
         with pytest.raises(InputError, match="planning"):
