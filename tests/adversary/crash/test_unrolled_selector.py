@@ -87,14 +87,22 @@ def test_collision_penalty_is_twice_differentiable_at_coincident_discs():
 def test_gradient_reaches_every_selector_parameter_through_the_unroll(tiny):
     model, batch = tiny
     selector = _selector()
+    logit_grads = []        # dloss/dlogits, to size the rounding of the shared bias's gradient
+
+    def keep_logit_grads(module, inputs, output) -> None:
+        output.register_hook(lambda g: logit_grads.append(g.abs().sum()))
+
+    selector.adv_head.register_forward_hook(keep_logit_grads)
     loss, p = unrolled_loss(model, batch, selector, mam=False, steps=3, eta=ETA)
     loss.sum().backward()
     for name, param in selector.named_parameters():
         assert param.grad is not None and torch.isfinite(param.grad).all(), name
         if name == "adv_head.2.bias":
             # One bias added to every agent's logit before the softmax leaves p unchanged: its
-            # gradient is zero exactly, and only rounding made it nonzero on some CPUs.
-            assert param.grad.abs().sum() < 1e-6, name
+            # gradient, the sum of the logits' gradients, is zero exactly. In float32 that sum
+            # keeps rounding of the order of eps × the logits' gradients (seen: 8e-6 on one CPU).
+            scale = float(sum(logit_grads))
+            assert scale > 0 and param.grad.abs().sum() <= 1e-4 * scale, (name, param.grad, scale)
             continue
         assert param.grad.abs().sum() > 0, name
     through = [param.grad.clone() for param in selector.parameters()]
