@@ -10,7 +10,7 @@ learned from the route rule's (the network's input; `riskmap.planner.st_model`);
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -18,6 +18,7 @@ import torch
 
 from rasterize.config import GridConfig, RasterConfig
 from rasterize.errors import InputError
+from rasterize.frames import ego_from_world, ego_pose
 from rasterize.maps import goal_map, motion_features, route_goal_cell, start_cell, uncertainty_map
 from rasterize.raster import rasterize_scene
 from rasterize.scene import Scene
@@ -105,13 +106,22 @@ class ReachConfig:
         return self.weight * outside.astype(np.float32)
 
 
+def planning_setting(side: dict, name: str, config_type: type):
+    """`config_type` from the sidecar's `planning.<name>` (its defaults, off, where absent); a
+    section that is not a mapping of the config's fields is refused in one line."""
+    settings = side.get("planning", {}).get(name)
+    if settings is None:
+        return config_type()
+    known = [f.name for f in fields(config_type)]
+    if not isinstance(settings, dict) or set(settings) - set(known):
+        raise InputError(f"the sidecar's planning.{name} {settings!r} is not a mapping of "
+                         f"{', '.join(known)}; fix or remove it")
+    return config_type(**settings)
+
+
 def without_agents_behind(scene: Scene) -> Scene:
     """`scene` with the other agents whose centre is behind the ego's now (ego-frame x < 0)
     marked absent at every step."""
-    from dataclasses import replace
-
-    from rasterize.frames import ego_from_world, ego_pose
-
     origin, heading = ego_pose(scene)
     x = ego_from_world(scene.states[:, scene.current_index, :2], origin, heading)[:, 0]
     keep = x >= 0.0
@@ -172,19 +182,8 @@ class SpaceTimePlanner:
         planner.route_goal_weight = float(weight)
         if goal_variance is not None and planner.route_goal_weight == 0.0:
             planner.route_goal_weight = 1.0
-        settings = side.get("planning", {}).get("time_gap")
-        if settings is not None:
-            if not isinstance(settings, dict) or set(settings) - {"time_gap_s", "weight", "ahead_only"}:
-                raise InputError(f"the sidecar's planning.time_gap {settings!r} is not a mapping of "
-                                 "time_gap_s, weight[, ahead_only]; fix or remove it")
-            planner.time_gap = TimeGapConfig(**settings)
-        settings = side.get("planning", {}).get("reach")
-        if settings is not None:
-            if not isinstance(settings, dict) or set(settings) - {"accel_mps2", "decel_mps2", "tolerance_cells",
-                                                                  "weight"}:
-                raise InputError(f"the sidecar's planning.reach {settings!r} is not a mapping of accel_mps2, "
-                                 "decel_mps2, tolerance_cells, weight; fix or remove it")
-            planner.reach = ReachConfig(**settings)
+        planner.time_gap = planning_setting(side, "time_gap", TimeGapConfig)
+        planner.reach = planning_setting(side, "reach", ReachConfig)
         return planner
 
     def reset(self, scene: Scene) -> None:
