@@ -295,6 +295,10 @@ class Fixtures:
             content = json.loads(sidecar.read_text())
             content["format_version"] = 99
             sidecar.write_text(json.dumps(content))
+        elif variant == "time_gap_ahead_yes":     # a planning setting of the wrong type
+            content = json.loads(sidecar.read_text())
+            content.setdefault("planning", {})["time_gap"] = {"weight": 20.0, "ahead_only": "yes"}
+            sidecar.write_text(json.dumps(content))
         elif variant.startswith("without_"):     # without_model, without_irl.horizon: a part left out
             content = json.loads(sidecar.read_text())
             *parents, name = variant.removeprefix("without_").split(".")
@@ -805,6 +809,8 @@ add(
     drive_row("st-without-spacetime", ("--checkpoint", ck(RM_ST_SRC, "without_spacetime")),
               S(ck(RM_ST_SRC, "without_spacetime"))),
     drive_row("st-without-maps", ("--checkpoint", ck(RM_ST_SRC, "without_maps")), S(ck(RM_ST_SRC, "without_maps"))),
+    drive_row("st-time-gap-ahead-yes", ("--checkpoint", ck(RM_ST_SRC, "time_gap_ahead_yes")),
+              S("ahead_only 'yes' must be true or false")),
     drive_row("bc-without-bc", ("--planner", lambda fx, t: f"cnn:{fx.checkpoint(BC_SRC, 'without_bc')}"),
               S(ck(BC_SRC, "without_bc"))),
     drive_row("frames-ck-without-model", ("--checkpoint", ck(RM_SRC, "without_model")),
